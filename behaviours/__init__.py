@@ -1,0 +1,1 @@
+"""Mode behaviours for py_trees (installed as ``sm_bt.behaviours``)."""

@@ -1,0 +1,81 @@
+"""Time for the engine: a clock protocol and a deterministic virtual clock.
+
+The manager never sleeps: it asks its clock to call it back later (timeouts, grace periods).
+:class:`VirtualClock` runs those callbacks when the owner advances it, so simulated runs are
+deterministic and can go much faster than wall time.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Callable
+from typing import Protocol
+
+
+class TimerHandle(Protocol):
+    def cancel(self) -> None:
+        """Do not run the callback (no effect if it already ran)."""
+
+
+class Clock(Protocol):
+    def now(self) -> float:
+        """Monotonic time in seconds."""
+
+    def call_later(self, delay: float, callback: Callable[[], None]) -> TimerHandle:
+        """Run ``callback`` once, ``delay`` seconds from now (never synchronously inside this call)."""
+
+
+class _VirtualTimer:
+    __slots__ = ("callback", "cancelled", "due")
+
+    def __init__(self, due: float, callback: Callable[[], None]) -> None:
+        self.due = due
+        self.callback = callback
+        self.cancelled = False
+
+    def cancel(self) -> None:
+        self.cancelled = True
+
+
+class VirtualClock:
+    """A clock that only moves when told to; callbacks run in due-time order, then FIFO."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self._now = start
+        self._queue: list[tuple[float, int, _VirtualTimer]] = []
+        self._sequence = itertools.count()
+
+    def now(self) -> float:
+        return self._now
+
+    def call_later(self, delay: float, callback: Callable[[], None]) -> _VirtualTimer:
+        timer = _VirtualTimer(self._now + max(0.0, delay), callback)
+        heapq.heappush(self._queue, (timer.due, next(self._sequence), timer))
+        return timer
+
+    def advance(self, seconds: float) -> None:
+        """Move time forward by ``seconds``, running every callback that falls due on the way."""
+        if seconds < 0:
+            raise ValueError("a clock cannot go backwards")
+        self.run_until(self._now + seconds)
+
+    def run_until(self, when: float) -> None:
+        """Run callbacks due up to ``when`` (including ones they schedule), then set the time to it."""
+        while self._queue and self._queue[0][0] <= when:
+            due, _, timer = heapq.heappop(self._queue)
+            if timer.cancelled:
+                continue
+            self._now = max(self._now, due)
+            timer.callback()
+        self._now = max(self._now, when)
+
+    def run_pending(self) -> None:
+        """Run what is due now (for example zero-delay callbacks) without moving time."""
+        self.run_until(self._now)
+
+    def next_due(self) -> float | None:
+        """When the next live callback is due, or ``None`` when nothing is scheduled."""
+        while self._queue and self._queue[0][2].cancelled:
+            heapq.heappop(self._queue)
+        return self._queue[0][0] if self._queue else None

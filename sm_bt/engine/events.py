@@ -1,0 +1,80 @@
+"""What the manager tells its observers, and the divergence record."""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from sm_bt.engine.inference import Actual
+from sm_bt.engine.requests import Request
+from sm_bt.model.states import StateMode
+
+
+class Cause(str, enum.Enum):
+    """Why a part's actual differs from its target."""
+
+    IN_FLIGHT = "in_flight"  # a request is still working on it
+    GRACE = "grace"  # it only just started; not an error yet
+    FAULT = "fault"  # a node left its target by itself: rules and recovery act on it
+    OVERRIDE = "override"  # parts were asked for something else directly: left alone
+
+
+@dataclass(frozen=True)
+class Divergence:
+    """A part whose actual state/mode is not its target, since ``since`` (clock seconds)."""
+
+    part: str
+    target: StateMode
+    actual: Actual
+    since: float
+    cause: Cause
+
+    @property
+    def is_error(self) -> bool:
+        """True once it is beyond the grace period and no request explains it."""
+        return self.cause in (Cause.FAULT, Cause.OVERRIDE)
+
+    def __str__(self) -> str:
+        return f"{self.part}: target {self.target}, actual {self.actual} ({self.cause.value})"
+
+
+class EventKind(str, enum.Enum):
+    ACTUAL = "actual"  # inferred actual state/mode changed
+    TARGET = "target"  # target changed
+    DIVERGENCE = "divergence"  # divergence started, changed cause, or ended (divergence None)
+    REQUEST = "request"  # a request started or finished
+    RULE = "rule"  # a rule fired
+    FAILED = "failed"  # recovery gave up on a part
+
+
+@dataclass(frozen=True)
+class Event:
+    kind: EventKind
+    part: str
+    time: float
+    message: str
+    actual: Actual | None = None
+    target: StateMode | None = None
+    divergence: Divergence | None = None
+    request: Request | None = None
+
+
+Observer = Callable[[Event], None]
+
+
+class Subscription:
+    """Returned by ``ModeManager.subscribe``; ``cancel()`` stops the notifications."""
+
+    def __init__(self, callback: Observer, parts: frozenset[str] | None, kinds: frozenset[EventKind] | None,
+                 remove: Callable[[Subscription], None]) -> None:
+        self.callback = callback
+        self.parts = parts
+        self.kinds = kinds
+        self._remove = remove
+
+    def wants(self, event: Event) -> bool:
+        return (self.parts is None or event.part in self.parts) and (self.kinds is None or event.kind in self.kinds)
+
+    def cancel(self) -> None:
+        self._remove(self)

@@ -1,0 +1,248 @@
+"""Bottom-up inference: from what nodes report to the state and mode of every part.
+
+Nodes report a lifecycle state and parameter values; a node's mode is inferred from its
+parameters (only while it is active), a system's state and mode from its parts, recursively.
+Tie-breaking follows the reference implementation: the target mode first, then the default
+mode, then every mode in byte-wise order of names. Unlike the reference, a part that was never
+seen makes its systems ``unknown`` with a reason instead of failing the whole inference.
+
+Inference is incremental: an update about one node recomputes that node and the systems above
+it, and returns only the parts whose result changed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+
+from sm_bt.model.states import State, StateMode
+from sm_bt.model.types import Model, NodePart, ParamValue, SystemPart
+
+
+@dataclass(frozen=True)
+class Actual:
+    """The actual state and mode of a part, and how they were obtained.
+
+    ``state_inferred``/``mode_inferred`` say whether a value was computed (the monitor's ``(*)``)
+    rather than reported by a node. ``reason`` explains an ``unknown`` state or a missing mode.
+    """
+
+    part: str
+    state: State
+    mode: str | None = None
+    state_inferred: bool = True
+    mode_inferred: bool = True
+    reason: str = ""
+
+    @property
+    def state_mode(self) -> StateMode:
+        return StateMode(self.state, self.mode)
+
+    @property
+    def known(self) -> bool:
+        return self.state is not State.UNKNOWN
+
+    def __str__(self) -> str:
+        return str(self.state_mode)
+
+
+@dataclass
+class NodeObservation:
+    """Everything reported about one node so far."""
+
+    seen: bool = False
+    state: State = State.UNKNOWN
+    parameters: dict[str, ParamValue] = field(default_factory=dict)
+    lifecycle: bool = True
+    gone: str = ""  # why the node is not reachable now ("" while reachable or never seen)
+
+    @property
+    def reachable(self) -> bool:
+        return self.seen and not self.gone
+
+
+Changes = dict[str, tuple[Actual, Actual]]
+
+
+def node_mode_candidates(part: NodePart, target: StateMode | None) -> list[str]:
+    """Modes in tie-break order: target mode, default mode, then byte-wise by name."""
+    order: list[str] = []
+    if target is not None and target.mode is not None and target.mode in part.modes:
+        order.append(target.mode)
+    order.append(part.default_mode)
+    order.extend(sorted(part.modes))
+    return list(dict.fromkeys(order))
+
+
+def infer_node(part: NodePart, obs: NodeObservation, target: StateMode | None) -> Actual:
+    if not obs.seen:
+        return Actual(part.name, State.UNKNOWN, state_inferred=False, reason="never seen")
+    if obs.gone:
+        return Actual(part.name, State.UNKNOWN, state_inferred=False, reason=obs.gone)
+    state_inferred = not obs.lifecycle
+    if obs.state is not State.ACTIVE:
+        # A node's mode only means something while it is active.
+        return Actual(part.name, obs.state, state_inferred=state_inferred, mode_inferred=False)
+    for name in node_mode_candidates(part, target):
+        if part.modes[name].matches(obs.parameters):
+            return Actual(part.name, State.ACTIVE, name, state_inferred=state_inferred)
+    return Actual(part.name, State.ACTIVE, None, state_inferred=state_inferred,
+                  reason=_mode_mismatch(part, obs.parameters))
+
+
+def _mode_mismatch(part: NodePart, parameters: Mapping[str, ParamValue]) -> str:
+    default = part.modes[part.default_mode]
+    shown = ", ".join(
+        f"{name}={parameters[name]!r}" if name in parameters else f"{name} unset" for name in default.parameters
+    )
+    return f"parameters match no mode ({shown})"
+
+
+def _entry_matches(entry_target: StateMode | None, actual: Actual) -> bool:
+    return entry_target is None or (actual.known and actual.state_mode == entry_target)
+
+
+def _system_mode_matches(part: SystemPart, mode: str, actual_of: Callable[[str], Actual]) -> bool:
+    return all(_entry_matches(e.target, actual_of(e.part)) for e in part.modes[mode].entries.values())
+
+
+def _first_difference(part: SystemPart, mode: str, actual_of: Callable[[str], Actual]) -> str:
+    for entry in part.modes[mode].entries.values():
+        actual = actual_of(entry.part)
+        if not _entry_matches(entry.target, actual):
+            return f"{entry.part} is {actual}, {mode} wants {entry.target}"
+    return ""
+
+
+#: The state a system shows while its parts move towards a non-active target state.
+_MOVING_TO = {
+    State.UNCONFIGURED: State.CLEANINGUP,
+    State.FINALIZED: State.SHUTTINGDOWN,
+}
+
+
+def infer_system(part: SystemPart, actual_of: Callable[[str], Actual], target: StateMode | None) -> Actual:
+    actuals = [actual_of(name) for name in part.parts]
+    for actual in actuals:
+        if actual.state is State.ERRORPROCESSING:
+            return Actual(part.name, State.ERRORPROCESSING, reason=f"{actual.part} is in errorprocessing")
+
+    relevant = part.parts
+    if target is not None and target.mode is not None and target.mode in part.modes:
+        mode = part.modes[target.mode]
+        relevant = tuple(e.part for e in mode.entries.values() if not e.dont_care)
+    unknown = [a for a in actuals if a.part in relevant and not a.known]
+    if unknown:
+        why = "; ".join(f"{a.part}: {a.reason or 'unknown'}" for a in unknown)
+        return Actual(part.name, State.UNKNOWN, reason=f"part state unknown ({why})")
+
+    if target is None:
+        return _infer_untargeted(part, actual_of, actuals)
+    if target.state is State.ACTIVE:
+        wanted = target.mode if target.mode is not None and target.mode in part.modes else part.default_mode
+        if _system_mode_matches(part, wanted, actual_of):
+            return Actual(part.name, State.ACTIVE, wanted)
+        # Still on the way: report the first mode (byte-wise) the parts do match, as the reference.
+        for name in sorted(part.modes):
+            if name != wanted and _system_mode_matches(part, name, actual_of):
+                return Actual(part.name, State.ACTIVATING, name, reason=_first_difference(part, wanted, actual_of))
+        return Actual(part.name, State.ACTIVATING, reason=_first_difference(part, wanted, actual_of))
+
+    if all(a.state is target.state for a in actuals):
+        return Actual(part.name, target.state)
+    moving = _MOVING_TO.get(target.state)
+    if moving is None:  # target inactive: coming down from active, or up from unconfigured
+        going_down = any(a.state in (State.ACTIVE, State.ACTIVATING, State.DEACTIVATING) for a in actuals)
+        moving = State.DEACTIVATING if going_down else State.CONFIGURING
+    lagging = next(a for a in actuals if a.state is not target.state)
+    return Actual(part.name, moving, reason=f"{lagging.part} is {lagging.state.label}")
+
+
+def _infer_untargeted(part: SystemPart, actual_of: Callable[[str], Actual], actuals: list[Actual]) -> Actual:
+    """A system nobody has commanded yet: the parts' common state, or the mode they match."""
+    states = {a.state for a in actuals}
+    if len(states) == 1 and State.ACTIVE not in states:
+        return Actual(part.name, states.pop())
+    for name in [part.default_mode, *sorted(part.modes)]:
+        if _system_mode_matches(part, name, actual_of):
+            return Actual(part.name, State.ACTIVE, name)
+    shown = ", ".join(f"{a.part} {a}" for a in actuals)
+    if states == {State.ACTIVE}:
+        return Actual(part.name, State.ACTIVE, reason=f"parts match no mode ({shown})")
+    return Actual(part.name, State.UNKNOWN, reason=f"parts match no mode and no target is set ({shown})")
+
+
+class Inference:
+    """Keeps node observations and targets, and the inferred actual of every part up to date."""
+
+    def __init__(self, model: Model) -> None:
+        self.model = model
+        self._observations = {node.name: NodeObservation() for node in model.nodes}
+        self._targets: dict[str, StateMode] = {}
+        self._actual: dict[str, Actual] = {}
+        # Bottom-up order of every part, and of the systems above each part.
+        self._order = sorted(model.parts, key=model.height)
+        self._above = {name: model.ancestors(name) for name in model.parts}
+        for name in self._order:
+            self._actual[name] = self._compute(name)
+
+    # -- queries -----------------------------------------------------------------------------
+
+    def actual(self, part: str) -> Actual:
+        return self._actual[part]
+
+    def target(self, part: str) -> StateMode | None:
+        return self._targets.get(part)
+
+    def observation(self, node: str) -> NodeObservation:
+        return self._observations[node]
+
+    # -- updates (each returns what changed) ---------------------------------------------------
+
+    def set_target(self, part: str, target: StateMode | None) -> Changes:
+        if target is None:
+            self._targets.pop(part, None)
+        else:
+            self._targets[part] = target
+        return self._recompute([part])
+
+    def node_appeared(self, node: str, state: State, parameters: Mapping[str, ParamValue],
+                      lifecycle: bool = True) -> Changes:
+        self._observations[node] = NodeObservation(True, state, dict(parameters), lifecycle)
+        return self._recompute([node])
+
+    def node_state(self, node: str, state: State) -> Changes:
+        obs = self._observations[node]
+        obs.seen, obs.state, obs.gone = True, state, ""
+        return self._recompute([node])
+
+    def node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> Changes:
+        self._observations[node].parameters.update(changed)
+        return self._recompute([node])
+
+    def node_vanished(self, node: str, reason: str) -> Changes:
+        obs = self._observations[node]
+        obs.gone = reason or "vanished"
+        return self._recompute([node])
+
+    def _recompute(self, parts: Iterable[str]) -> Changes:
+        dirty: set[str] = set()
+        for part in parts:
+            dirty.add(part)
+            dirty.update(self._above[part])
+        changes: Changes = {}
+        for name in self._order:
+            if name in dirty:
+                new = self._compute(name)
+                old = self._actual[name]
+                if new != old:
+                    self._actual[name] = new
+                    changes[name] = (old, new)
+        return changes
+
+    def _compute(self, name: str) -> Actual:
+        part = self.model.parts[name]
+        target = self._targets.get(name)
+        if isinstance(part, NodePart):
+            return infer_node(part, self._observations[name], target)
+        return infer_system(part, self._actual.__getitem__, target)

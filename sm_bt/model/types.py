@@ -1,0 +1,284 @@
+"""Immutable data of a loaded SMH (system modes and hierarchy) model.
+
+Everything here is plain, frozen data produced by :func:`sm_bt.load_model`. The loader resolves
+what the file leaves implicit, so that no later layer has to: node modes carry the *full*
+parameter set (defaults inherited), system modes carry an entry for every part (default entries
+inherited), an ``active`` entry without a mode names the part's default mode, and rules carry
+resolved states.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TypeAlias
+
+from sm_bt.model.states import StateMode
+
+#: A parameter value as a ROS 2 parameter file can hold it. Arrays are tuples (immutable).
+ParamValue: TypeAlias = (
+    bool | int | float | str | tuple[bool, ...] | tuple[int, ...] | tuple[float, ...] | tuple[str, ...]
+)
+
+#: The reference's name of the default mode; still accepted, and used when no ``defaultmode`` is set.
+DEFAULT_MODE = "__DEFAULT__"
+#: Part-entry value (extension) meaning "leave this part as it is" in a system mode.
+DONT_CARE = "__DONTCARE__"
+
+
+class PartKind(str, enum.Enum):
+    """What a top-level entry of the model is."""
+
+    NODE = "node"
+    SYSTEM = "system"
+
+
+@dataclass(frozen=True)
+class Location:
+    """Where something was written: file and 1-based line."""
+
+    file: str
+    line: int
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}"
+
+
+@dataclass(frozen=True)
+class Match:
+    """How an observed parameter value is compared with a mode's value during inference.
+
+    With no field set the comparison is exact (same type, equal value; arrays element-wise).
+    ``tolerance`` accepts ``|actual - value| <= tolerance``; ``minimum``/``maximum`` accept a
+    closed range. Both apply to numbers only (an int observed for a double counts as a number).
+    """
+
+    tolerance: float | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+
+    def accepts(self, expected: ParamValue, actual: ParamValue) -> bool:
+        if self.tolerance is None and self.minimum is None and self.maximum is None:
+            return exact_match(expected, actual)
+        if not _is_number(actual):
+            return False
+        value = float(actual)  # type: ignore[arg-type]
+        if math.isnan(value):
+            return False
+        if self.tolerance is not None and (
+            not _is_number(expected) or abs(value - float(expected)) > self.tolerance  # type: ignore[arg-type]
+        ):
+            return False
+        below = self.minimum is not None and value < self.minimum
+        above = self.maximum is not None and value > self.maximum
+        return not (below or above)
+
+
+EXACT = Match()
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def exact_match(expected: ParamValue, actual: ParamValue) -> bool:
+    """Same type and equal value; ``bool`` is never equal to ``int``; arrays compare element-wise."""
+    if type(expected) is not type(actual):
+        return False
+    return expected == actual
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter of a node mode: the value to set, and how to recognise it when observed."""
+
+    name: str
+    value: ParamValue
+    location: Location
+    match: Match = EXACT
+
+    def matches(self, actual: ParamValue) -> bool:
+        return self.match.accepts(self.value, actual)
+
+
+@dataclass(frozen=True)
+class NodeMode:
+    """A named parameter set of a node. ``parameters`` is complete: defaults are inherited."""
+
+    name: str
+    parameters: Mapping[str, ParamSpec]
+    location: Location
+
+    def values(self) -> dict[str, ParamValue]:
+        """The full parameter set to send (atomically) when switching a node to this mode."""
+        return {name: spec.value for name, spec in self.parameters.items()}
+
+    def matches(self, observed: Mapping[str, ParamValue]) -> bool:
+        """True when every parameter of the mode is observed with a matching value."""
+        for name, spec in self.parameters.items():
+            if name not in observed or not spec.matches(observed[name]):
+                return False
+        return True
+
+
+@dataclass(frozen=True)
+class PartEntry:
+    """What a system mode asks of one of its parts.
+
+    ``target`` is ``None`` for a don't-care entry (the part is left as it is and any state of it
+    matches). For ``active`` the mode is always resolved (to the part's default when omitted).
+    """
+
+    part: str
+    target: StateMode | None
+    location: Location
+    inherited: bool = False
+
+    @property
+    def dont_care(self) -> bool:
+        return self.target is None
+
+
+@dataclass(frozen=True)
+class SystemMode:
+    """A named set of part entries of a system. ``entries`` covers every part of the system.
+
+    ``stages`` is the switching order: stages run one after another, the parts of one stage in
+    parallel. The default (no order given) is a single stage holding every part.
+    """
+
+    name: str
+    entries: Mapping[str, PartEntry]
+    stages: tuple[tuple[str, ...], ...]
+    location: Location
+
+
+@dataclass(frozen=True)
+class Rule:
+    """``if target(system) == if_target and actual(if_part) == if_part_state: target := new_target``."""
+
+    name: str
+    system: str
+    if_target: StateMode
+    if_part: str
+    if_part_state: StateMode
+    new_target: StateMode
+    location: Location
+
+
+@dataclass(frozen=True)
+class NodePart:
+    """A lifecycle node of the model, with its parameter modes (file order)."""
+
+    name: str
+    default_mode: str
+    modes: Mapping[str, NodeMode]
+    rules: tuple[Rule, ...]
+    location: Location
+    kind: PartKind = field(default=PartKind.NODE, init=False)
+
+    @property
+    def parts(self) -> tuple[str, ...]:
+        return ()
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The parameter set shared by every mode (the default mode's, in file order)."""
+        return tuple(self.modes[self.default_mode].parameters)
+
+
+@dataclass(frozen=True)
+class SystemPart:
+    """A system of the model: its parts (in ``parts:`` order) and its modes (file order)."""
+
+    name: str
+    default_mode: str
+    modes: Mapping[str, SystemMode]
+    parts: tuple[str, ...]
+    rules: tuple[Rule, ...]
+    location: Location
+    kind: PartKind = field(default=PartKind.SYSTEM, init=False)
+
+
+Part: TypeAlias = NodePart | SystemPart
+
+
+class Severity(str, enum.Enum):
+    ERROR = "error"
+    WARNING = "warning"
+
+
+@dataclass(frozen=True)
+class ModelIssue:
+    """One finding of the loader: where, how bad, and what to change."""
+
+    location: Location
+    severity: Severity
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.location}: {self.severity.value}: {self.message}"
+
+
+@dataclass(frozen=True)
+class Model:
+    """A validated model. Parts are in file order; see the query helpers for the hierarchy."""
+
+    path: str
+    parts: Mapping[str, Part]
+    warnings: tuple[ModelIssue, ...] = ()
+
+    def part(self, name: str) -> Part:
+        """The part called ``name``; ``KeyError`` with the known names otherwise."""
+        try:
+            return self.parts[name]
+        except KeyError:
+            raise KeyError(f"no part {name!r} in model {self.path} (parts: {', '.join(self.parts)})") from None
+
+    @property
+    def nodes(self) -> tuple[NodePart, ...]:
+        return tuple(p for p in self.parts.values() if isinstance(p, NodePart))
+
+    @property
+    def systems(self) -> tuple[SystemPart, ...]:
+        return tuple(p for p in self.parts.values() if isinstance(p, SystemPart))
+
+    def parents(self, name: str) -> tuple[str, ...]:
+        """The systems that list ``name`` as one of their parts."""
+        return tuple(s.name for s in self.systems if name in s.parts)
+
+    def roots(self) -> tuple[str, ...]:
+        """Parts that belong to no system (the tops of the hierarchies)."""
+        return tuple(name for name in self.parts if not self.parents(name))
+
+    def nodes_under(self, name: str) -> tuple[str, ...]:
+        """Every node reachable from ``name`` (``name`` itself if it is a node), each once."""
+        seen: dict[str, None] = {}
+        stack = [name]
+        while stack:
+            current = self.parts[stack.pop()]
+            if isinstance(current, NodePart):
+                seen.setdefault(current.name, None)
+            else:
+                stack.extend(reversed(current.parts))
+        return tuple(seen)
+
+    def ancestors(self, name: str) -> tuple[str, ...]:
+        """Every system above ``name``, lowest first (bottom-up order), each once."""
+        order: list[str] = []
+        frontier = list(self.parents(name))
+        while frontier:
+            current = frontier.pop(0)
+            if current not in order:
+                order.append(current)
+                frontier.extend(self.parents(current))
+        return tuple(sorted(order, key=self.height))
+
+    def height(self, name: str) -> int:
+        """0 for a node, 1 + the tallest part for a system: sorting by it gives bottom-up order."""
+        part = self.parts[name]
+        if isinstance(part, NodePart) or not part.parts:
+            return 0
+        return 1 + max(self.height(child) for child in part.parts)

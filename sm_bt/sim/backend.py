@@ -1,0 +1,488 @@
+"""SimBackend: the :class:`~sm_bt.engine.backend.Backend` protocol served by simulated lifecycle nodes.
+
+Every node of the model runs as a :class:`~sm_bt.sim.node.SimNode`. Time is a
+:class:`~sm_bt.engine.clock.VirtualClock`: nothing happens until its owner advances it, so runs are
+deterministic. Requests reach a node through the clock (delay 0) and never answer from inside the
+call; callbacks take ``transition_delay`` (``error_delay`` for ``on_error``), parameter sets take
+``parameter_delay``.
+
+Faults are injected from outside (tests, demos) and each one is recorded in :attr:`SimBackend.events`:
+:meth:`~SimBackend.fail_next`, :meth:`~SimBackend.hang_next`, :meth:`~SimBackend.reject_parameters`,
+:meth:`~SimBackend.set_parameter`, :meth:`~SimBackend.trigger`, :meth:`~SimBackend.crash`,
+:meth:`~SimBackend.restart`, :meth:`~SimBackend.start_late`. Armed faults and delay overrides belong to
+the simulation, not to the node process: they survive a restart. Fault methods act at once (their
+reports to the listener come from inside the call); only the Backend requests are deferred.
+
+The backend is single-threaded: drive it from the thread that advances the clock.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
+from sm_bt.engine.clock import TimerHandle, VirtualClock
+from sm_bt.engine.lifecycle import REQUESTABLE, Outcome, Transition
+from sm_bt.model.states import State
+from sm_bt.model.types import Model, ParamValue
+from sm_bt.sim.node import ParameterRejected, SimNode, TransitionEvent, TransitionRefused
+
+_REQUESTABLE = frozenset(step.transition for step in REQUESTABLE)
+
+
+class NodeStatus(str, enum.Enum):
+    """Whether a simulated node's process runs and answers."""
+
+    NOT_STARTED = "not started"
+    RUNNING = "running"
+    CRASHED = "crashed"  # stopped answering, not yet reported vanished
+    VANISHED = "vanished"
+
+
+class EventKind(str, enum.Enum):
+    REQUEST = "request"  # a change_state / set_parameters call arrived at the backend
+    RESPONSE = "response"  # its done() was called
+    TRANSITION = "transition"  # a lifecycle TransitionEvent of the node
+    PARAMETERS = "parameters"  # parameter values changed (by a set or from outside)
+    FAULT = "fault"  # a fault was armed or took effect
+    STARTED = "started"  # a node process started (late start, restart)
+    VANISHED = "vanished"  # the backend reported the node gone
+
+
+@dataclass(frozen=True)
+class SimEvent:
+    """Something that happened in the simulation; ``details`` is a one-line human description."""
+
+    time: float
+    node: str
+    kind: EventKind
+    details: str
+    transition: TransitionEvent | None = None
+    parameters: Mapping[str, ParamValue] | None = None
+
+    def __str__(self) -> str:
+        return f"{self.time:8.3f}  {self.node:<20} {self.kind.value:<10} {self.details}"
+
+
+@dataclass(eq=False)  # identity: two equal-looking calls are still two calls
+class _Call:
+    node: str
+    label: str
+    done: Done
+    answered: bool = False
+
+
+@dataclass(frozen=True)
+class _Failure:
+    outcome: Outcome
+    on_error: Outcome
+
+
+def _format(values: Mapping[str, ParamValue]) -> str:
+    return "{" + ", ".join(f"{key}: {value!r}" for key, value in values.items()) + "}"
+
+
+class SimBackend:
+    """Simulated lifecycle nodes for every node part of ``model``.
+
+    Nodes start running in ``initial_state`` (one state for all, or per node; unlisted nodes are
+    unconfigured) with their default mode's parameter values, overridden per node by
+    ``initial_parameters``. Nodes named in ``late`` are not running until that virtual time.
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        clock: VirtualClock | None = None,
+        *,
+        transition_delay: float = 0.05,
+        error_delay: float = 0.05,
+        parameter_delay: float = 0.01,
+        vanish_after: float = 1.0,
+        initial_state: State | Mapping[str, State] = State.UNCONFIGURED,
+        initial_parameters: Mapping[str, Mapping[str, ParamValue]] | None = None,
+        late: Mapping[str, float] | None = None,
+    ) -> None:
+        for label, value in (("transition_delay", transition_delay), ("error_delay", error_delay),
+                             ("parameter_delay", parameter_delay), ("vanish_after", vanish_after)):
+            _check_delay(label, value)
+        self._clock = clock if clock is not None else VirtualClock()
+        self.transition_delay = transition_delay
+        self.error_delay = error_delay
+        self.parameter_delay = parameter_delay
+        self.vanish_after = vanish_after
+        #: Everything that happened, oldest first.
+        self.events: list[SimEvent] = []
+
+        names = tuple(part.name for part in model.nodes)
+        self._declared = {part.name: part.modes[part.default_mode].values() for part in model.nodes}
+        for label, mapping in (("initial_state", initial_state if isinstance(initial_state, Mapping) else {}),
+                               ("initial_parameters", initial_parameters or {}), ("late", late or {})):
+            unknown = sorted(set(mapping) - set(names))
+            if unknown:
+                raise ValueError(f"{label} names unknown nodes {unknown} (nodes: {', '.join(names)})")
+        self._initial_state = {
+            name: (initial_state.get(name, State.UNCONFIGURED) if isinstance(initial_state, Mapping)
+                   else initial_state)
+            for name in names
+        }
+        self._initial_overrides = {name: dict((initial_parameters or {}).get(name, {})) for name in names}
+
+        self._nodes: dict[str, SimNode] = {}
+        self._status: dict[str, NodeStatus] = {}
+        self._pending: dict[str, list[_Call]] = {name: [] for name in names}
+        self._timers: dict[str, set[TimerHandle]] = {name: set() for name in names}
+        self._delays: dict[tuple[str, Transition | None], float] = {}
+        self._failures: dict[tuple[str, Transition], _Failure] = {}
+        self._hangs: set[tuple[str, Transition]] = set()
+        self._parameter_rejections: dict[str, str] = {}
+        self._listener: BackendListener | None = None
+        self._watched: set[str] = set()
+        self._visible: set[str] = set()  # watched nodes reported appeared (and not vanished since)
+
+        for name in names:
+            self._nodes[name] = self._spawn(name, self._initial_state[name])  # validates the initial values
+            self._status[name] = NodeStatus.RUNNING
+        for name, at in (late or {}).items():
+            self.start_late(name, at)
+
+    # -- inspection ---------------------------------------------------------------------------------
+
+    @property
+    def clock(self) -> VirtualClock:
+        return self._clock
+
+    @property
+    def nodes(self) -> tuple[str, ...]:
+        """The simulated node names, in model order."""
+        return tuple(self._nodes)
+
+    def node(self, name: str) -> SimNode:
+        """The current process of node ``name`` (a fresh one after a restart)."""
+        self._require(name)
+        return self._nodes[name]
+
+    def status(self, name: str) -> NodeStatus:
+        self._require(name)
+        return self._status[name]
+
+    # -- Backend protocol ---------------------------------------------------------------------------
+
+    def attach(self, nodes: Sequence[str], listener: BackendListener) -> None:
+        """Report to ``listener`` about ``nodes``: running ones appear now, others when they start."""
+        self.detach()
+        self._listener = listener
+        self._watched = set(nodes)
+        for name in dict.fromkeys(nodes):
+            if self._status.get(name) is NodeStatus.RUNNING:
+                self._appear(name)
+
+    def detach(self) -> None:
+        """Stop all listener reports. Calls in flight still get their ``done``."""
+        self._listener = None
+        self._watched = set()
+        self._visible = set()
+
+    def change_state(self, node: str, transition: Transition, done: Done) -> None:
+        call = _Call(node, transition.label, done)
+        self._record(node, EventKind.REQUEST, f"change_state {transition.label} ({int(transition)})")
+        if self._accept(call):
+            self._after(node, 0.0, lambda: self._deliver_transition(call, transition))
+
+    def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
+        values = dict(parameters)
+        call = _Call(node, "set_parameters", done)
+        self._record(node, EventKind.REQUEST, f"set_parameters {_format(values)}", parameters=values)
+        if self._accept(call):
+            self._after(node, self.parameter_delay, lambda: self._deliver_parameters(call, values))
+
+    # -- configuration and fault injection ----------------------------------------------------------
+
+    def set_delay(self, node: str, seconds: float, transition: Transition | None = None) -> None:
+        """How long ``node``'s callback for ``transition`` runs; with ``None``, every callback of the
+        node (``on_error`` included) that has no per-transition delay."""
+        self._require(node)
+        _check_delay("delay", seconds)
+        if transition is not None:
+            self._require_requestable(transition)
+        self._delays[(node, transition)] = seconds
+
+    def fail_next(self, node: str, transition: Transition, outcome: Outcome = Outcome.FAILURE,
+                  on_error: Outcome = Outcome.SUCCESS) -> None:
+        """The next requested ``transition`` of ``node`` returns ``outcome`` (FAILURE or ERROR) from its
+        callback; after ERROR, ``on_error`` returns ``on_error`` (SUCCESS -> unconfigured, else finalized).
+        :meth:`trigger` does not consume it (it brings its own outcome)."""
+        self._require(node)
+        self._require_requestable(transition)
+        if outcome is Outcome.SUCCESS:
+            raise ValueError("fail_next needs Outcome.FAILURE or Outcome.ERROR")
+        self._failures[(node, transition)] = _Failure(outcome, on_error)
+        self._record(node, EventKind.FAULT, f"armed: next on_{transition.label} returns {outcome.name}")
+
+    def hang_next(self, node: str, transition: Transition) -> None:
+        """The next requested ``transition`` of ``node`` enters its transition state and never leaves it:
+        no response comes until the node crashes (then vanishes) or restarts."""
+        self._require(node)
+        self._require_requestable(transition)
+        self._hangs.add((node, transition))
+        self._record(node, EventKind.FAULT, f"armed: next {transition.label} hangs")
+
+    def reject_parameters(self, node: str, reason: str | None) -> None:
+        """While set, every ``set_parameters`` on ``node`` fails with ``reason`` and changes nothing;
+        ``None`` clears it."""
+        self._require(node)
+        if reason is None:
+            self._parameter_rejections.pop(node, None)
+            self._record(node, EventKind.FAULT, "cleared: parameter sets accepted again")
+        else:
+            self._parameter_rejections[node] = reason
+            self._record(node, EventKind.FAULT, f"armed: parameter sets rejected ({reason})")
+
+    def set_parameter(self, node: str, name: str, value: ParamValue) -> None:
+        """Parameter ``name`` of the running ``node`` changes from outside (another client, the node
+        itself); type-checked like a set (``ValueError``), reported with ``node_parameters``."""
+        self._require_running(node, "set a parameter of")
+        try:
+            self._nodes[node].set_parameters({name: value})
+        except ParameterRejected as error:
+            raise ValueError(f"node {node}: {error}") from None
+        self._record(node, EventKind.FAULT, f"parameter {name} changed from outside")
+        self._parameters_changed(node, {name: value})
+
+    def trigger(self, node: str, transition: Transition, outcome: Outcome = Outcome.SUCCESS,
+                on_error: Outcome = Outcome.SUCCESS) -> None:
+        """The running ``node`` starts ``transition`` by itself (no request, no response); its callback
+        returns ``outcome`` after the delay, and after ERROR ``on_error`` returns ``on_error``.
+        ``ValueError`` if the transition is not valid in the node's state.
+
+        laser_resender's failure: ``trigger("laser_resender", Transition.DEACTIVATE, Outcome.ERROR)``
+        gives deactivating -> errorprocessing -> unconfigured (events 4, 42, 60)."""
+        self._require_running(node, "trigger a transition of")
+        try:
+            event = self._nodes[node].start(transition)
+        except TransitionRefused as error:
+            raise ValueError(f"node {node} cannot {transition.label} by itself: {error}") from None
+        self._record(node, EventKind.FAULT, f"{transition.label} by itself, on_{transition.label} will "
+                                            f"return {outcome.name}")
+        self._moved(node, event)
+        self._run_callbacks(node, transition, outcome, on_error, lambda _final: None)
+
+    def crash(self, node: str) -> None:
+        """The running ``node`` stops answering at once: calls in flight and new calls get no response.
+        After ``vanish_after`` s it is reported vanished and every pending call fails."""
+        self._require_running(node, "crash")
+        self._cancel_timers(node)
+        self._status[node] = NodeStatus.CRASHED
+        self._record(node, EventKind.FAULT, "crashed: no more answers")
+        self._after(node, self.vanish_after, lambda: self._vanish(node))
+
+    def restart(self, node: str, state: State = State.UNCONFIGURED) -> None:
+        """A fresh process of ``node`` (running, crashed, vanished or not yet started) starts now in
+        ``state`` with the initial parameter values; calls pending on the old one fail at once."""
+        self._require(node)
+        if not state.is_primary:
+            raise ValueError(f"cannot restart node {node} in {state}: a node starts in a primary state")
+        self._stop(node, f"node {node} restarted")
+        self._start(node, state, f"restarted in {state}")
+
+    def start_late(self, node: str, at: float) -> None:
+        """``node`` is not running until virtual time ``at``; then it starts in its initial state and
+        appears. Not for a node already reported to a listener (use :meth:`crash`/:meth:`restart`)."""
+        self._require(node)
+        if node in self._visible:
+            raise ValueError(f"node {node} was already reported running; use crash() and restart()")
+        self._stop(node, f"node {node} is not running")
+        self._status[node] = NodeStatus.NOT_STARTED
+        self._record(node, EventKind.FAULT, f"not running until t={at:g}")
+        self._after(node, at - self._clock.now(),
+                    lambda: self._start(node, self._initial_state[node], f"started late in "
+                                                                        f"{self._initial_state[node]}"))
+
+    # -- request handling ---------------------------------------------------------------------------
+
+    def _accept(self, call: _Call) -> bool:
+        """Queue a call on a running node (True); a crashed node keeps it unanswered until it vanishes;
+        anything else fails, through the clock."""
+        status = self._status.get(call.node)
+        if status in (NodeStatus.RUNNING, NodeStatus.CRASHED):
+            self._pending[call.node].append(call)
+            return status is NodeStatus.RUNNING
+        result = CallResult(False, f"node {call.node} is not running")
+        self._clock.call_later(0.0, lambda: self._respond(call, result))
+        return False
+
+    def _deliver_transition(self, call: _Call, transition: Transition) -> None:
+        node = call.node
+        try:
+            event = self._nodes[node].start(transition)
+        except TransitionRefused as error:
+            self._respond(call, CallResult(False, f"{transition.label} of {node} refused: {error}"))
+            return
+        self._moved(node, event)
+        if (node, transition) in self._hangs:
+            self._hangs.discard((node, transition))
+            self._record(node, EventKind.FAULT, f"{transition.label} hangs in {event.goal}: no response")
+            return
+        failure = self._failures.pop((node, transition), _Failure(Outcome.SUCCESS, Outcome.SUCCESS))
+        if failure.outcome is not Outcome.SUCCESS:
+            self._record(node, EventKind.FAULT, f"on_{transition.label} will return {failure.outcome.name}")
+
+        def finished(final: State) -> None:
+            self._respond(call, _transition_result(node, transition, failure.outcome, final))
+
+        self._run_callbacks(node, transition, failure.outcome, failure.on_error, finished)
+
+    def _run_callbacks(self, node: str, transition: Transition, outcome: Outcome, on_error: Outcome,
+                       finished: Callable[[State], None]) -> None:
+        """After the delay, the transition callback returns ``outcome``; on ERROR, error processing
+        follows (after the error delay). ``finished`` gets the primary state reached."""
+        sim = self._nodes[node]
+
+        def error_processed() -> None:
+            event = sim.complete(on_error)
+            self._moved(node, event)
+            finished(event.goal)
+
+        def callback_returned() -> None:
+            event = sim.complete(outcome)
+            self._moved(node, event)
+            if event.goal is State.ERRORPROCESSING:
+                self._after(node, self._delay(node, None, self.error_delay), error_processed)
+            else:
+                finished(event.goal)
+
+        self._after(node, self._delay(node, transition, self.transition_delay), callback_returned)
+
+    def _deliver_parameters(self, call: _Call, values: dict[str, ParamValue]) -> None:
+        node = call.node
+        rejection = self._parameter_rejections.get(node)
+        if rejection is not None:
+            self._respond(call, CallResult(False, rejection))
+            return
+        try:
+            self._nodes[node].set_parameters(values)
+        except ParameterRejected as error:
+            self._respond(call, CallResult(False, f"set_parameters on {node} rejected: {error}"))
+            return
+        self._parameters_changed(node, values)
+        self._respond(call, CallResult(True))
+
+    def _respond(self, call: _Call, result: CallResult) -> None:
+        if call.answered:
+            return
+        call.answered = True
+        pending = self._pending.get(call.node, [])
+        if call in pending:
+            pending.remove(call)
+        outcome = "ok" if result.ok else f"failed: {result.reason}"
+        self._record(call.node, EventKind.RESPONSE, f"{call.label}: {outcome}")
+        call.done(result)
+
+    # -- process life -------------------------------------------------------------------------------
+
+    def _spawn(self, node: str, state: State) -> SimNode:
+        sim = SimNode(node, self._declared[node], self._clock, state=state)
+        try:
+            sim.set_parameters(self._initial_overrides[node])
+        except ParameterRejected as error:
+            raise ValueError(f"initial_parameters for node {node}: {error}") from None
+        return sim
+
+    def _start(self, node: str, state: State, details: str) -> None:
+        self._nodes[node] = self._spawn(node, state)
+        self._status[node] = NodeStatus.RUNNING
+        self._record(node, EventKind.STARTED, details)
+        if node in self._watched:
+            self._appear(node)
+
+    def _stop(self, node: str, reason: str) -> None:
+        """End the current process without a vanish report: its calls fail with ``reason``."""
+        self._cancel_timers(node)
+        self._fail_pending(node, reason)
+
+    def _vanish(self, node: str) -> None:
+        self._status[node] = NodeStatus.VANISHED
+        reason = f"no answer for {float(self.vanish_after)} s (crashed?)"
+        self._record(node, EventKind.VANISHED, reason)
+        if node in self._visible and self._listener is not None:
+            self._visible.discard(node)
+            self._listener.node_vanished(node, reason)
+        self._fail_pending(node, f"node {node} vanished")
+
+    def _fail_pending(self, node: str, reason: str) -> None:
+        for call in list(self._pending[node]):
+            self._respond(call, CallResult(False, reason))
+
+    # -- reporting and bookkeeping ------------------------------------------------------------------
+
+    def _appear(self, node: str) -> None:
+        if self._listener is None:
+            return
+        sim = self._nodes[node]
+        self._visible.add(node)
+        self._listener.node_appeared(node, NodeReport(sim.state, sim.parameters))
+
+    def _moved(self, node: str, event: TransitionEvent) -> None:
+        self._record(node, EventKind.TRANSITION, str(event), transition=event)
+        if node in self._visible and self._listener is not None:
+            self._listener.node_state(node, event.goal)
+
+    def _parameters_changed(self, node: str, values: Mapping[str, ParamValue]) -> None:
+        self._record(node, EventKind.PARAMETERS, _format(values), parameters=dict(values))
+        if values and node in self._visible and self._listener is not None:
+            self._listener.node_parameters(node, dict(values))
+
+    def _record(self, node: str, kind: EventKind, details: str, *, transition: TransitionEvent | None = None,
+                parameters: Mapping[str, ParamValue] | None = None) -> None:
+        self.events.append(SimEvent(self._clock.now(), node, kind, details, transition, parameters))
+
+    def _after(self, node: str, delay: float, action: Callable[[], None]) -> None:
+        """Schedule ``action`` on behalf of ``node``'s process, so that a crash or restart cancels it."""
+        timers = self._timers[node]
+
+        def run() -> None:
+            timers.discard(handle)
+            action()
+
+        handle = self._clock.call_later(max(0.0, delay), run)
+        timers.add(handle)
+
+    def _cancel_timers(self, node: str) -> None:
+        for handle in self._timers[node]:
+            handle.cancel()
+        self._timers[node].clear()
+
+    def _delay(self, node: str, transition: Transition | None, default: float) -> float:
+        per_node = self._delays.get((node, None), default)
+        return per_node if transition is None else self._delays.get((node, transition), per_node)
+
+    def _require(self, node: str) -> None:
+        if node not in self._nodes:
+            raise KeyError(f"no simulated node {node!r} (nodes: {', '.join(self._nodes)})")
+
+    def _require_running(self, node: str, action: str) -> None:
+        self._require(node)
+        if self._status[node] is not NodeStatus.RUNNING:
+            raise ValueError(f"cannot {action} node {node}: it is {self._status[node].value}")
+
+    @staticmethod
+    def _require_requestable(transition: Transition) -> None:
+        if transition not in _REQUESTABLE:
+            raise ValueError(f"{transition.name} is not a requestable transition")
+
+
+def _transition_result(node: str, transition: Transition, outcome: Outcome, final: State) -> CallResult:
+    if outcome is Outcome.SUCCESS:
+        return CallResult(True)
+    reason = f"{transition.label} of {node} failed: on_{transition.label} returned {outcome.name}"
+    if outcome is Outcome.ERROR:
+        reason += f" (node went to errorprocessing, then {final})"
+    return CallResult(False, reason)
+
+
+def _check_delay(label: str, seconds: float) -> None:
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise ValueError(f"{label} must be a finite number of seconds >= 0, not {seconds!r}")

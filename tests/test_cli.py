@@ -1,0 +1,273 @@
+"""The ``sm-bt`` console script: ``check`` and ``modes``, error paths and exit codes."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sm_bt.cli import COMMANDS, bundled_names, format_value, main
+
+MODELS = Path(__file__).parent / "models"
+OK = MODELS / "cli_ok.yaml"
+BAD = MODELS / "cli_bad.yaml"
+LENIENT = MODELS / "cli_lenient.yaml"
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str | Path) -> tuple[int, str, str]:
+    code = main([str(arg) for arg in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+# -- check -------------------------------------------------------------------------------------
+
+
+def test_check_ok(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(capsys, "check", OK)
+    assert code == 0
+    assert out.splitlines()[0] == f"{OK}: ok (2 systems, 5 nodes)"
+    assert err == ""
+
+
+def test_check_bad_model_reports_every_error_with_its_line(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(capsys, "check", BAD)
+    assert code == 1
+    assert out == ""
+    lines = err.splitlines()
+    errors = [line for line in lines if ": error: " in line]
+    assert len(errors) == 2, err
+    assert errors[0].startswith(f"{BAD}:10: error: ")
+    assert "'inactive'" in errors[0]  # tells how to fix the upper-case label
+    assert errors[1].startswith(f"{BAD}:21: error: ")
+    assert "'wrong'" in errors[1]
+    assert lines[-1] == f"{BAD}: failed (2 errors)"
+    assert "Traceback" not in err
+
+
+def test_check_several_models_fails_if_any_fails(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(capsys, "check", OK, BAD)
+    assert code == 1
+    assert f"{OK}: ok" in out
+    assert f"{BAD}: failed" in err
+
+
+def test_check_missing_file(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    missing = tmp_path / "nope.yaml"
+    code, out, err = run(capsys, "check", missing)
+    assert code == 1
+    assert out == ""
+    assert err.splitlines() == [f"sm-bt: error: {missing}: no such file, and no bundled model of that name "
+                                f"(bundled: {', '.join(bundled_names()) or 'none'})"]
+
+
+def test_check_unknown_bundled_name(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "check", "no_such_model_anywhere")
+    assert code == 1
+    assert err.startswith("sm-bt: error: no_such_model_anywhere: no such file")
+
+
+def test_check_directory(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code, out, err = run(capsys, "check", tmp_path)
+    assert (code, out) == (1, "")
+    assert str(tmp_path) in err
+    assert "directory" in err.lower()
+    assert "Traceback" not in err
+
+
+def test_check_invalid_yaml(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("a:\n  ros__parameters:\n    type: [node\n")
+    code, _, err = run(capsys, "check", broken)
+    assert code == 1
+    assert f"{broken}:" in err
+    assert "Traceback" not in err
+
+
+def test_check_lenient_downgrades_undefined_part(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "check", LENIENT)
+    assert code == 1
+    assert f"{LENIENT}:12: error: " in err
+    assert "ghost" in err
+
+    code, out, err = run(capsys, "check", "--lenient", LENIENT)
+    assert code == 0
+    assert err == ""
+    lines = out.splitlines()
+    assert lines[0] == f"{LENIENT}: ok (1 system, 1 node)"
+    assert any(line.startswith(f"{LENIENT}:12: warning: ") and "ghost" in line for line in lines[1:])
+
+
+@pytest.mark.skipif(not bundled_names(), reason="no bundled models yet")
+def test_check_bundled_models_by_name(capsys: pytest.CaptureFixture[str]) -> None:
+    for name in bundled_names():
+        code, out, err = run(capsys, "check", name)
+        assert code == 0, err
+        assert out.startswith(f"{name}: ok (")
+
+
+def test_check_pilot_by_name(capsys: pytest.CaptureFixture[str]) -> None:
+    if "pilot" not in bundled_names():
+        pytest.skip("bundled model 'pilot' not written yet")
+    code, out, _ = run(capsys, "check", "pilot")
+    assert code == 0
+    assert out.startswith("pilot: ok (1 system, ")
+
+
+def test_a_file_wins_over_a_bundled_name(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    (tmp_path / "pilot").write_text(OK.read_text())
+    monkeypatch.chdir(tmp_path)
+    code, out, _ = run(capsys, "check", "pilot")
+    assert code == 0
+    assert out.startswith("pilot: ok (2 systems, 5 nodes)")
+
+
+# -- modes -------------------------------------------------------------------------------------
+
+
+def test_modes_prints_the_hierarchy(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(capsys, "modes", OK)
+    assert code == 0, err
+    assert err == ""
+    lines = out.splitlines()
+    expected = [
+        "system robot",
+        "  parts: base, arm, sensors",
+        "  modes:",
+        "    * __DEFAULT__",
+        "        base: active.__DEFAULT__",
+        "        arm: inactive",
+        "        sensors: active.__DEFAULT__",
+        "        order: sensors -> base, arm",
+        "      FAST",
+        "        base: active.FAST",
+        "        arm: (keep)",
+        "        sensors: active.__DEFAULT__",
+        "        order: sensors -> base, arm",
+        "      SAFE",
+        "        base: active.SLOW",
+        "        arm: inactive",
+        "        sensors: active.FULL",
+        "        order: sensors -> base, arm",
+        "  rules:",
+        "    slow_down: if target active.FAST and sensors is inactive -> active.SAFE",
+        "  system sensors",
+        "    parts: lidar, camera",
+        "    modes:",
+        "      * __DEFAULT__",
+        "          lidar: active.__DEFAULT__",
+        "          camera: inactive",
+        "        FULL",
+        "          lidar: active.HIGH",
+        "          camera: active.__DEFAULT__",
+    ]
+    start = lines.index("system robot")
+    assert lines[start:start + len(expected)] == expected
+
+
+def test_modes_lists_every_node_with_full_parameter_sets(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "modes", OK)
+    assert code == 0
+    lines = out.splitlines()
+    base = lines.index("  node base (part of robot)")
+    assert lines[base:base + 12] == [
+        "  node base (part of robot)",
+        "    modes:",
+        "      * __DEFAULT__",
+        "          max_speed: 0.5  ~ tolerance 0.05",
+        "          controller: 'pid'",
+        "        FAST",
+        "          max_speed: 2.0  ~ tolerance 0.05",
+        "          controller: 'pid'",
+        "        SLOW",
+        "          max_speed: 0.2  ~ [0.1, 0.3]",
+        "          controller: 'pid'",
+        "  node arm (part of robot)",
+    ]
+    assert "          exposure: 1000.0" in lines  # 1e3 is a double in ROS 2
+    assert "  node lidar (part of sensors)" in lines
+    logger = lines.index("  node logger (in no system)")
+    assert lines[logger:logger + 6] == [
+        "  node logger (in no system)",
+        "    modes:",
+        "      * QUIET",
+        "          level: 20",
+        "        VERBOSE",
+        "          level: 10",
+    ]
+    # Nodes come after every system.
+    assert logger > lines.index("  system sensors")
+
+
+def test_modes_error_handling(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code, out, err = run(capsys, "modes", BAD)
+    assert (code, out) == (1, "")
+    assert f"{BAD}:10: error: " in err
+
+    code, out, err = run(capsys, "modes", tmp_path / "missing.yaml")
+    assert (code, out) == (1, "")
+    assert err.startswith("sm-bt: error: ")
+
+
+def test_modes_lenient_prints_warnings_to_stderr(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(capsys, "modes", "--lenient", LENIENT)
+    assert code == 0
+    assert f"{LENIENT}:12: warning: " in err
+    assert "system system" in out.splitlines()
+
+
+def test_modes_bundled_pilot(capsys: pytest.CaptureFixture[str]) -> None:
+    if "pilot" not in bundled_names():
+        pytest.skip("bundled model 'pilot' not written yet")
+    code, out, _ = run(capsys, "modes", "pilot")
+    assert code == 0
+    assert "system pilot" in out.splitlines()
+
+
+def test_format_value() -> None:
+    assert format_value(True) == "true"
+    assert format_value(8) == "8"
+    assert format_value(1e3) == "1000.0"
+    assert format_value("yes") == "'yes'"
+    assert format_value((1.0, 2.5)) == "[1.0, 2.5]"
+    assert format_value(float("inf")) == ".inf"
+
+
+# -- usage -------------------------------------------------------------------------------------
+
+
+def test_usage_errors_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([]) == 2
+    assert main(["frobnicate"]) == 2
+    assert main(["check"]) == 2
+    assert main(["modes", str(OK), str(OK)]) == 2
+    err = capsys.readouterr().err
+    assert "usage: sm-bt" in err
+    assert "Traceback" not in err
+
+
+def test_help_lists_every_command(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    for command in COMMANDS:
+        assert command.name in out
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.startswith("sm-bt ")
+
+
+def test_console_script() -> None:
+    script = Path(sys.executable).with_name("sm-bt")
+    if not script.exists():
+        pytest.skip(f"console script not installed next to {sys.executable}")
+    ok = subprocess.run([str(script), "check", str(OK)], capture_output=True, text=True, timeout=60)
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.startswith(f"{OK}: ok (2 systems, 5 nodes)")
+    bad = subprocess.run([str(script), "check", str(BAD)], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 1
+    assert f"{BAD}:10: error: " in bad.stderr
+    assert "Traceback" not in bad.stderr
+    usage = subprocess.run([str(script), "bogus"], capture_output=True, text=True, timeout=60)
+    assert usage.returncode == 2

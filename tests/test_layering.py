@@ -1,0 +1,43 @@
+"""The layers' import rules: model imports nothing of sm_bt, the engine imports no rclpy."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def imported_modules(folder: Path) -> set[str]:
+    found: set[str] = set()
+    for path in folder.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                found.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                found.add(node.module)
+    return found
+
+
+def test_model_layer_depends_on_nothing_of_sm_bt_above_it() -> None:
+    modules = imported_modules(ROOT / "sm_bt" / "model")
+    assert not {m for m in modules if m.startswith("sm_bt.") and not m.startswith("sm_bt.model")}
+
+
+def test_engine_depends_only_on_the_model() -> None:
+    modules = imported_modules(ROOT / "sm_bt" / "engine")
+    allowed = ("sm_bt.model", "sm_bt.engine")
+    assert not {m for m in modules if m.startswith("sm_bt.") and not m.startswith(allowed)}
+    assert not {m for m in modules if m.split(".")[0] in {"rclpy", "py_trees", "rich"}}
+
+
+def test_engine_and_sim_import_without_rclpy_loaded() -> None:
+    # A fresh interpreter where importing rclpy would fail loudly: the engine must not need it.
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "import sm_bt.engine.manager, sm_bt.engine.inference, sm_bt.sim, sm_bt.model.loader\n"
+        "assert not any(m == 'rclpy' or m.startswith('rclpy.') for m in sys.modules if sys.modules[m])\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)

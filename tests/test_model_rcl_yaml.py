@@ -1,0 +1,231 @@
+"""ROS 2 parameter-file (rcl) typing and refusals, as the model loader applies them."""
+
+from __future__ import annotations
+
+import math
+from textwrap import dedent
+
+import pytest
+
+from sm_bt.model import ModelError, ModelIssue, load_model_text
+from sm_bt.model.rcl_yaml import rcl_scalar
+
+NODE = """\
+n:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+"""  # parameters follow from line 7 on, indented by 10
+
+
+def node_text(*param_lines: str) -> str:
+    return NODE + "".join(f"          {line}\n" for line in param_lines)
+
+
+def default_values(*param_lines: str) -> dict[str, object]:
+    model = load_model_text(node_text(*param_lines))
+    return model.parts["n"].modes["__DEFAULT__"].values()  # type: ignore[union-attr]
+
+
+def errors_of(text: str) -> list[ModelIssue]:
+    with pytest.raises(ModelError) as caught:
+        load_model_text(text)
+    return list(caught.value.issues)
+
+
+@pytest.mark.parametrize("text", ["Y", "y", "yes", "Yes", "YES", "true", "True", "TRUE", "on", "On", "ON"])
+def test_true_spellings(text: str) -> None:
+    assert rcl_scalar(text) is True
+
+
+@pytest.mark.parametrize("text", ["N", "n", "no", "No", "NO", "false", "False", "FALSE", "off", "Off", "OFF"])
+def test_false_spellings(text: str) -> None:
+    assert rcl_scalar(text) is False
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("0", 0),
+        ("42", 42),
+        ("-7", -7),
+        ("+7", 7),
+        ("0x7C", 124),  # strtoll base 0: hexadecimal
+        ("0X7c", 124),
+        ("010", 8),  # leading 0: octal
+        ("-010", -8),
+        ("9223372036854775807", 2**63 - 1),
+        ("1e3", 1000.0),  # a double, not an int (and not a string as in PyYAML)
+        ("1.", 1.0),
+        (".5", 0.5),
+        ("-2.5e-3", -0.0025),
+        ("08", 8.0),  # not octal, so strtoll stops early; strtod reads it
+        ("9223372036854775808", 9223372036854775808.0),  # int64 overflow: strtod takes it
+        ("0x1p3", 8.0),  # strtod hexadecimal float
+        ("inf", math.inf),
+        ("-Infinity", -math.inf),
+        (".inf", math.inf),
+        (".Inf", math.inf),
+        ("+.INF", math.inf),
+        ("-.inf", -math.inf),
+        ("-.Inf", -math.inf),
+        ("PID", "PID"),
+        ("yEs", "yEs"),  # not one of the bool spellings
+        ("1_000", "1_000"),  # PyYAML would say 1000
+        ("1e999", "1e999"),  # ERANGE: kept as text
+        ("0x", "0x"),
+        ("1e", "1e"),
+        ("1.2.3", "1.2.3"),
+        ("~", "~"),
+        ("null", "null"),
+    ],
+)
+def test_scalar_typing(text: str, expected: object) -> None:
+    value = rcl_scalar(text)
+    assert type(value) is type(expected)
+    assert value == expected
+
+
+@pytest.mark.parametrize("text", [".nan", ".NaN", ".NAN", "nan", "NaN"])
+def test_nan_spellings(text: str) -> None:
+    value = rcl_scalar(text)
+    assert isinstance(value, float) and math.isnan(value)
+
+
+@pytest.mark.parametrize("text", ["true", "1", "0x10", "1e3", ".inf"])
+def test_quoted_scalars_are_strings(text: str) -> None:
+    assert rcl_scalar(text, quoted=True) == text
+
+
+def test_typing_in_a_model() -> None:
+    values = default_values(
+        "flag: yes",
+        "count: 010",
+        "mask: 0x7C",
+        "gain: 1e3",
+        "ratio: 1.",
+        "limit: .inf",
+        "quoted_int: '010'",
+        "quoted_bool: \"on\"",
+        "tagged: !!str 12",
+        "name: PID",
+    )
+    assert values == {
+        "flag": True,
+        "count": 8,
+        "mask": 124,
+        "gain": 1000.0,
+        "ratio": 1.0,
+        "limit": math.inf,
+        "quoted_int": "010",
+        "quoted_bool": "on",
+        "tagged": "12",
+        "name": "PID",
+    }
+    assert type(values["gain"]) is float
+
+
+def test_arrays_become_tuples_of_one_type() -> None:
+    values = default_values(
+        "ints: [1, 2, 0x10]",
+        "doubles: [0.5, 1e3]",
+        "bools: [yes, off]",
+        "strings: [a, 'b', \"1\"]",
+        "block:",
+        "  - 1.5",
+        "  - 2.5",
+    )
+    assert values == {
+        "ints": (1, 2, 16),
+        "doubles": (0.5, 1000.0),
+        "bools": (True, False),
+        "strings": ("a", "b", "1"),
+        "block": (1.5, 2.5),
+    }
+
+
+def test_mixed_array_int_in_doubles_suggests_the_double() -> None:
+    (issue,) = errors_of(node_text("gains: [0.5, 0]"))
+    assert issue.location.line == 7
+    assert "write 0.0 instead of 0" in issue.message
+
+
+def test_mixed_array_other_cases() -> None:
+    issues = errors_of(node_text("a: [1, 0.5]", "b: [x, 1]", "c: [true, 1]"))
+    assert [i.location.line for i in issues] == [7, 8, 9]
+    assert "write every item as a double" in issues[0].message
+    assert 'quote it ("1")' in issues[1].message
+    assert "same type" in issues[2].message
+
+
+def test_nested_and_empty_arrays_are_refused() -> None:
+    issues = errors_of(node_text("nested: [[1], [2]]", "maps: [{a: 1}]", "empty: []"))
+    assert [i.location.line for i in issues] == [7, 7, 8, 9]
+    assert "cannot hold lists" in issues[0].message
+    assert "cannot hold maps" in issues[2].message
+    assert "empty list" in issues[3].message
+
+
+def test_empty_unquoted_value_is_refused_but_empty_quoted_is_a_string() -> None:
+    (issue,) = errors_of(node_text("missing:", "fine: ''"))
+    assert issue.location.line == 7
+    assert issue.message.startswith("No value at line 7")
+    assert default_values("fine: ''") == {"fine": ""}
+
+
+def test_anchors_and_aliases_are_refused() -> None:
+    issues = errors_of(node_text("a: &speed 0.5", "b: *speed"))
+    assert [i.location.line for i in issues] == [7, 8]
+    assert "anchor '&speed'" in issues[0].message
+    assert "alias '*speed'" in issues[1].message
+    assert all("do not support" in i.message for i in issues)
+
+
+def test_duplicate_keys_are_refused() -> None:
+    (issue,) = errors_of(node_text("a: 1", "a: 2"))
+    assert issue.location.line == 8
+    assert "duplicate key 'a' (first at line 7)" in issue.message
+
+
+def test_dotted_and_nested_names_collide() -> None:
+    (issue,) = errors_of(node_text("ns.a: 1", "ns:", "  a: 2"))
+    assert issue.location.line == 9
+    assert "'ns.a' is set twice" in issue.message
+
+
+def test_yaml_syntax_error_has_its_line() -> None:
+    text = dedent(
+        """\
+        n:
+          ros__parameters:
+            type: node
+            modes: [a, b
+        """
+    )
+    (issue,) = errors_of(text)
+    assert issue.location.line == 5
+    assert "YAML syntax error" in issue.message
+
+
+def test_bad_indentation_reports_the_line() -> None:
+    (issue,) = errors_of("a:\n  b: 1\n c: 2\n")
+    assert issue.location.line == 3
+
+
+def test_two_documents_are_refused() -> None:
+    (issue,) = errors_of(node_text("a: 1") + "---\nm:\n  ros__parameters: {type: node}\n")
+    assert issue.location.line == 8
+    assert "one YAML document" in issue.message
+
+
+def test_empty_file_is_refused() -> None:
+    (issue,) = errors_of("# nothing here\n")
+    assert "holds no model" in issue.message
+
+
+def test_top_level_must_be_a_map() -> None:
+    (issue,) = errors_of("- a\n- b\n")
+    assert issue.location.line == 1
+    assert "map of part names" in issue.message

@@ -1,0 +1,125 @@
+"""Divergences, rules with a grace period, recovery to target, and what they must not do."""
+
+from __future__ import annotations
+
+from engine_helpers import Rig, bundled, fixture
+
+from sm_bt.engine.events import Cause, Event, EventKind
+from sm_bt.engine.lifecycle import Outcome, Transition
+from sm_bt.engine.requests import Origin
+from sm_bt.model.states import State
+
+
+def laser_failure(rig: Rig) -> None:
+    """laser_resender runs deactivate by itself; on_deactivate errors; it ends unconfigured."""
+    rig.backend.trigger("laser_resender", Transition.DEACTIVATE, outcome=Outcome.ERROR)
+
+
+def test_pilot_rule_fires_after_the_grace_period() -> None:
+    rig = Rig(bundled("pilot_rules"), grace_period=2.0, recovery=False)
+    assert rig.finish(rig.manager.change_mode("pilot", "f_normal_mode")).succeeded
+    laser_failure(rig)
+    rig.run(1.0)
+    assert rig.state("laser_resender") == "unconfigured"
+    assert not rig.kinds(EventKind.RULE)
+    divergence = rig.manager.divergence("pilot")
+    assert divergence is not None and divergence.cause is Cause.GRACE and not divergence.is_error
+    rig.until(lambda: bool(rig.kinds(EventKind.RULE)), limit=2.0)
+    assert "degrade_from_normal" in rig.kinds(EventKind.RULE)[0].message
+    rig.until(lambda: rig.state("pilot") == "active.f_degraded_mode", limit=5.0)
+    assert rig.state("pointcloud_to_laser") == "active.__DEFAULT__"
+    assert rig.state("laser_resender") == "unconfigured"
+    assert rig.state("amcl") == "active.DEGRADED"
+    assert rig.backend.node("controller_server").parameters["FollowPath.transform_tolerance"] == 2.5
+    assert rig.manager.divergences() == []
+
+
+def test_rules_do_not_fire_against_a_request_in_flight() -> None:
+    # The reference fires degrade_from_PERFORMANCE while the manipulator is still being
+    # activated (its issue #94). Here a request in flight is never an error.
+    rig = Rig(bundled("actuation"), grace_period=0.1, transition_delay=1.0)
+    assert rig.finish(rig.manager.change_mode("actuation", "__DEFAULT__")).succeeded
+    request = rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+    assert request.succeeded, request.reason
+    assert not rig.kinds(EventKind.RULE)
+    assert rig.state("actuation") == "active.PERFORMANCE"
+
+
+def test_rules_fire_on_a_fault_bottom_up_before_recovery() -> None:
+    rig = Rig(fixture("nested"), grace_period=0.5)
+    assert rig.finish(rig.manager.change_mode("robot", "WORK")).succeeded
+    rig.backend.trigger("lidar", Transition.DEACTIVATE)
+    rig.until(lambda: rig.state("robot") == "active.PARK", limit=5.0)
+    assert [e.message.split(":")[0] for e in rig.kinds(EventKind.RULE)] == ["rule park_without_lidar"]
+    # The rule above covers lidar: nobody tried to restore it to its old target.
+    assert not [e for e in rig.kinds(EventKind.REQUEST) if e.request and e.request.origin is Origin.RECOVERY]
+
+
+def test_recovery_restores_the_target_when_no_rule_matches() -> None:
+    rig = Rig(bundled("actuation"), grace_period=0.5)
+    assert rig.finish(rig.manager.change_mode("actuation", "__DEFAULT__")).succeeded
+    rig.backend.trigger("drive_base", Transition.DEACTIVATE)
+    rig.run(0.3)
+    assert rig.state("drive_base") == "inactive"
+    rig.until(lambda: rig.state("drive_base") == "active.__DEFAULT__", limit=3.0)
+    recoveries = [e.request for e in rig.kinds(EventKind.REQUEST) if e.request and e.request.origin is Origin.RECOVERY]
+    assert recoveries and recoveries[0].part == "drive_base"
+    assert rig.state("actuation") == "active.__DEFAULT__"
+
+
+def test_recovery_is_bounded_then_the_node_is_failed() -> None:
+    rig = Rig(bundled("pilot"), grace_period=0.5, recovery_attempts=3)
+    assert rig.finish(rig.manager.change_mode("pilot", "f_normal_mode")).succeeded
+
+    def keep_failing(event: Event) -> None:
+        request = event.request
+        if event.kind is EventKind.REQUEST and request and request.origin is Origin.RECOVERY and not request.done:
+            rig.backend.fail_next("laser_resender", Transition.CONFIGURE, Outcome.FAILURE)
+
+    rig.manager.subscribe(keep_failing)
+    laser_failure(rig)
+    rig.until(lambda: bool(rig.kinds(EventKind.FAILED)), limit=20.0)
+    recoveries = list({e.request.id: e.request for e in rig.kinds(EventKind.REQUEST)
+                       if e.request and e.request.origin is Origin.RECOVERY}.values())
+    assert len(recoveries) == 3 and not any(r.succeeded for r in recoveries)
+    assert rig.manager.failed() == ["laser_resender"]
+    assert "after 3 attempts" in rig.kinds(EventKind.FAILED)[0].message
+    # Only the mode that wants laser_resender unconfigured is still reachable.
+    assert rig.manager.reachable_modes("pilot") == ["f_degraded_mode"]
+    rig.run(10.0)
+    assert len(rig.kinds(EventKind.FAILED)) == 1  # reported once, no further attempts
+
+
+def test_restarted_node_is_restored() -> None:
+    rig = Rig(bundled("actuation"), grace_period=0.5, recovery_attempts=2, vanish_after=0.5)
+    assert rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE")).succeeded
+    rig.backend.crash("manipulator")
+    rig.until(lambda: rig.manager.failed() == ["manipulator"], limit=20.0)
+    assert rig.manager.actual("manipulator").state is State.UNKNOWN
+    rig.backend.restart("manipulator")
+    rig.until(lambda: rig.state("actuation") == "active.PERFORMANCE", limit=10.0)
+    assert rig.manager.failed() == []
+
+
+def test_a_users_direct_change_is_not_fought() -> None:
+    rig = Rig(bundled("actuation"), grace_period=0.2)
+    assert rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE")).succeeded
+    assert rig.finish(rig.manager.change_state("manipulator", "deactivate")).succeeded
+    rig.run(5.0)
+    # degrade_from_PERFORMANCE would match, but the user asked for this.
+    assert not rig.kinds(EventKind.RULE)
+    assert rig.state("manipulator") == "inactive"
+    divergence = rig.manager.divergence("actuation")
+    assert divergence is not None and divergence.cause is Cause.OVERRIDE
+
+
+def test_divergence_events_start_and_end() -> None:
+    rig = Rig(bundled("actuation"), grace_period=0.5)
+    assert rig.finish(rig.manager.change_mode("actuation", "__DEFAULT__")).succeeded
+    rig.events.clear()
+    rig.backend.trigger("drive_base", Transition.DEACTIVATE)
+    rig.until(lambda: rig.state("drive_base") == "active.__DEFAULT__", limit=3.0)
+    messages = [e.message for e in rig.kinds(EventKind.DIVERGENCE, "drive_base")]
+    assert any("(grace)" in m for m in messages)
+    assert any("(fault)" in m for m in messages)
+    assert messages[-1].endswith("back on target active.__DEFAULT__")

@@ -1,0 +1,1 @@
+"""Mission trees built from sm_bt behaviours (installed as ``sm_bt.trees``)."""
