@@ -173,7 +173,8 @@ def test_match_dotted_name_and_combined_fields() -> None:
 @pytest.mark.parametrize(
     ("match_line", "message"),
     [
-        ("      sped: {tolerance: 0.1}", "'sped', which is not a parameter of the default mode (did you mean 'speed'?)"),
+        ("      sped: {tolerance: 0.1}",
+         "'sped', which is not a parameter of the default mode (did you mean 'speed'?)"),
         ("      mode_name: {tolerance: 0.1}", "needs a numeric parameter"),
         ("      speed: {tolerance: -0.1}", "write a finite number >= 0"),
         ("      speed: [1.0, 0.0]", "min 1.0 > max 0.0: swap them"),

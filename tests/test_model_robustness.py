@@ -10,7 +10,8 @@ import pytest
 from sm_bt.model import ModelError, load_model_text
 
 FIXTURES = [Path(__file__).parent / "models" / name
-            for name in ("loader_rules.yaml", "loader_defaultmode.yaml", "loader_namespaced.yaml", "loader_nested.yaml")]
+            for name in ("loader_rules.yaml", "loader_defaultmode.yaml", "loader_namespaced.yaml",
+                         "loader_nested.yaml")]
 # Values that break the model in different layers: YAML syntax, rcl typing, structure, states.
 REPLACEMENTS = ("", "[", "{}", "*a", "ACTIVE.X", "[1, 0.5]", "{a: [b]}")
 

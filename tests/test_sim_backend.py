@@ -6,58 +6,29 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import pytest
+from sim_helpers import Recorder, node_part
+from sim_helpers import attached as attached_to
 
 from sm_bt.engine.backend import Backend, CallResult, NodeReport
 from sm_bt.engine.clock import VirtualClock
 from sm_bt.engine.lifecycle import OUTCOMES, REQUESTABLE, Outcome, Transition
 from sm_bt.model.states import State
-from sm_bt.model.types import DEFAULT_MODE, Location, Model, NodeMode, NodePart, ParamSpec, ParamValue
+from sm_bt.model.types import Model, ParamValue
 from sm_bt.sim import EventKind, SimBackend
 
 S = State
 T = Transition
-LOC = Location("test.yaml", 1)
 
-
-def node_part(name: str, **params: ParamValue) -> NodePart:
-    specs = {key: ParamSpec(key, value, LOC) for key, value in params.items()}
-    return NodePart(name, DEFAULT_MODE, {DEFAULT_MODE: NodeMode(DEFAULT_MODE, specs, LOC)}, (), LOC)
 
 
 def pilot_model() -> Model:
-    parts = [node_part("amcl", transform_tolerance=0.2, alpha1=0.2, beams=60),
-             node_part("laser_resender", node_name="laser_resender")]
+    parts = [node_part("amcl", {"transform_tolerance": 0.2, "alpha1": 0.2, "beams": 60}),
+             node_part("laser_resender", {"node_name": "laser_resender"})]
     return Model("test.yaml", {p.name: p for p in parts})
 
 
-class Recorder:
-    """A BackendListener that keeps every report as (kind, node, payload)."""
-
-    def __init__(self) -> None:
-        self.reports: list[tuple[str, str, Any]] = []
-
-    def node_appeared(self, node: str, report: NodeReport) -> None:
-        self.reports.append(("appeared", node, report))
-
-    def node_state(self, node: str, state: State) -> None:
-        self.reports.append(("state", node, state))
-
-    def node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> None:
-        self.reports.append(("parameters", node, dict(changed)))
-
-    def node_vanished(self, node: str, reason: str) -> None:
-        self.reports.append(("vanished", node, reason))
-
-    def states(self, node: str) -> list[State]:
-        return [p for kind, n, p in self.reports if kind == "state" and n == node]
-
-
 def attached(**options: Any) -> tuple[SimBackend, Recorder]:
-    backend = SimBackend(pilot_model(), **options)
-    recorder = Recorder()
-    backend.attach(backend.nodes, recorder)
-    recorder.reports.clear()
-    return backend, recorder
+    return attached_to(pilot_model(), **options)
 
 
 def transition_ids(backend: SimBackend, node: str) -> list[int]:

@@ -197,9 +197,7 @@ class NodeJob(Job):
         self.finished = True
 
 
-class Sequence(Job):
-    """Children one after another (the stages of a switching order)."""
-
+class _Composite(Job):
     def __init__(self, children: list[Job]) -> None:
         self.children = children
 
@@ -210,6 +208,10 @@ class Sequence(Job):
     def cancel(self) -> None:
         for child in self.children:
             child.cancel()
+
+
+class Sequence(_Composite):
+    """Children one after another (the stages of a switching order)."""
 
     def current(self) -> Job | None:
         return next((c for c in self.children if not c.finished), None)
@@ -233,19 +235,8 @@ class Sequence(Job):
         self.finished = True
 
 
-class Parallel(Job):
+class Parallel(_Composite):
     """Children all at once (one stage)."""
-
-    def __init__(self, children: list[Job]) -> None:
-        self.children = children
-
-    def nodes(self) -> Iterator[NodeJob]:
-        for child in self.children:
-            yield from child.nodes()
-
-    def cancel(self) -> None:
-        for child in self.children:
-            child.cancel()
 
     def feedback(self) -> str:
         busy = [c.feedback() for c in self.children if not c.finished]

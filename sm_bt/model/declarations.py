@@ -199,7 +199,7 @@ def _read_parts_list(decl: PartDecl, value: YNode, diag: Diagnostics) -> tuple[Y
     if isinstance(value, YScalar):
         words = value.text.split()
         lines = value.word_lines if len(value.word_lines) == len(words) else (value.line,) * len(words)
-        return tuple(YScalar(part_ref(word), word, line) for word, line in zip(words, lines))
+        return tuple(YScalar(part_ref(word), word, line) for word, line in zip(words, lines, strict=True))
     if isinstance(value, YSeq):
         return tuple(YScalar(part_ref(item.text), item.value, item.line) for item in value.items)
     diag.error(value.line, f"'parts' of system {decl.name!r} must list part names (one per line, or "
