@@ -57,6 +57,13 @@ Extensions (the reference does not know them; it would misread a file that uses 
 4. **defaultmode** (from the reference's unreleased ``refactoring`` branch): any mode can be the
    default; ``__DEFAULT__`` in entries and rules then names that mode.
 
+Details worth knowing: scalars are typed as rcl types them (``010`` is the integer 8, ``1e3`` a
+double, ``yes``/``on`` booleans; quote a value or tag it ``!!str`` to keep it a string). Targets
+(system-mode entries, ``if_target``, ``new_target``) must be states a part can rest in
+(``unconfigured``, ``inactive``, ``active``, ``finalized``); ``if_part`` may name any lifecycle
+state, e.g. ``errorprocessing``, and any part below the system (nested parts included). A
+leading ``/`` on a part name (root namespace) is ignored everywhere.
+
 ``strict=False`` turns one error into a warning: a system-mode entry naming a part that is not
 defined (the reference's own ``example_modes_with_namespace.yaml`` has such a typo); the entry
 is dropped.
