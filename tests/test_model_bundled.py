@@ -29,12 +29,6 @@ def reference_folder() -> Path:
     pytest.skip("the reference model files are not available on this machine")
 
 
-def system(model_name: str, part: str) -> SystemPart:
-    found = load_model(bundled.path(model_name)).part(part)
-    assert isinstance(found, SystemPart)
-    return found
-
-
 def node(model_name: str, part: str) -> NodePart:
     found = load_model(bundled.path(model_name)).part(part)
     assert isinstance(found, NodePart)
