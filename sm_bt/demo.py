@@ -62,7 +62,7 @@ class Demo:
 
     def _narrate(self, event: Event) -> None:
         if event.kind is EventKind.REQUEST and event.request is not None:
-            self.say(("  " if event.request.done else "->") + " " + event.message)
+            self.say(("->" if event.message.endswith(" started") else "  ") + " " + event.message)
         elif event.kind in (EventKind.RULE, EventKind.FAILED):
             self.say(f"!! {event.message}")
         elif event.kind is EventKind.DIVERGENCE and event.part == "pilot":

@@ -37,7 +37,8 @@ def test_pilot_rule_fires_after_the_grace_period() -> None:
 def test_rules_do_not_fire_against_a_request_in_flight() -> None:
     # The reference fires degrade_from_PERFORMANCE while the manipulator is still being
     # activated (its issue #94). Here a request in flight is never an error.
-    rig = Rig(bundled("actuation"), grace_period=0.1, transition_delay=1.0)
+    # Slow nodes keep the manipulator inactive far beyond the grace period while it is switched.
+    rig = Rig(bundled("actuation"), grace_period=0.1, transition_delay=1.0, parameter_delay=1.0)
     assert rig.finish(rig.manager.change_mode("actuation", "__DEFAULT__")).succeeded
     request = rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
     assert request.succeeded, request.reason

@@ -54,6 +54,10 @@ class ModeManager:
         self.recovery_enabled = recovery
         self._lock = threading.RLock()
         self._inference = Inference(model)
+        # The hierarchy never changes: walk it once, not on every node report.
+        self._below = {name: frozenset(model.nodes_under(name)) for name in model.parts}
+        self._above = {name: model.ancestors(name) for name in model.parts}
+        self._bottom_up = sorted(model.parts, key=model.height)
         self._executions: dict[int, Execution] = {}
         self._divergences: dict[str, Divergence] = {}
         self._since: dict[str, float] = {}
@@ -236,11 +240,7 @@ class ModeManager:
                 self._attempts.pop(node, None)
                 self._failed.discard(node)
         self._restart_grace(scope)
-        actual = self._inference.actual(part)
-        if actual.known and actual.state_mode == target:
-            request._finish(True, f"already {target}", now)
-            self._emit(EventKind.REQUEST, part, f"#{request.id} {description}: already {target}", request=request)
-            return request
+        # A part already in the target needs no step: its plan finishes in the first pump.
         job = self._plan(part, target)
         execution = Execution(request, job, scope, previous)
         self._executions[request.id] = execution
@@ -362,25 +362,23 @@ class ModeManager:
     def _restart_grace(self, nodes: Iterable[str]) -> None:
         for node in nodes:
             self._since.pop(node, None)
-            for above in self.model.ancestors(node):
+            for above in self._above[node]:
                 self._since.pop(above, None)
 
     def _evaluate(self) -> list[Divergence]:
         """Recompute the divergences, emit their changes, and return those that are faults."""
         now = self.clock.now()
-        busy: set[str] = set()
-        for execution in self._executions.values():
-            busy |= execution.scope
+        busy = self._busy_nodes()
         found: dict[str, Divergence] = {}
-        for part in sorted(self.model.parts, key=self.model.height):
+        for part in self._bottom_up:
             target = self._inference.target(part)
             actual = self._inference.actual(part)
             if target is None or (actual.known and actual.state_mode == target):
                 self._since.pop(part, None)
                 continue
             since = self._since.setdefault(part, now)
-            nodes = self.model.nodes_under(part)
-            if busy.intersection(nodes):
+            nodes = self._below[part]
+            if busy & nodes:
                 cause = Cause.IN_FLIGHT
             elif now - since < self.grace_period - _EPSILON:
                 cause = Cause.GRACE
@@ -432,7 +430,7 @@ class ModeManager:
         if self.rules_enabled:
             for divergence in faults:  # already bottom-up
                 owner = divergence.part
-                if any(owner in self.model.ancestors(f) for f in fired):
+                if any(owner in self._above[f] for f in fired):
                     continue  # a lower rule is already correcting this
                 for rule in self.model.parts[owner].rules:
                     condition = self._inference.actual(rule.if_part)
@@ -451,7 +449,7 @@ class ModeManager:
             node = divergence.part
             if not isinstance(self.model.parts[node], NodePart) or node in self._failed:
                 continue
-            if node in fired or any(a in fired for a in self.model.ancestors(node)):
+            if node in fired or any(a in fired for a in self._above[node]):
                 continue
             if self._inference.target(node) != divergence.target or node in self._busy_nodes():
                 continue  # a rule above has just re-targeted it

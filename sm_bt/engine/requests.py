@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import enum
 import itertools
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -108,9 +108,6 @@ class Job:
     def cancel(self) -> None:
         raise NotImplementedError
 
-    def nodes(self) -> Iterator[NodeJob]:
-        raise NotImplementedError
-
     @property
     def over(self) -> bool:
         return self.finished or bool(self.failure)
@@ -135,9 +132,6 @@ class NodeJob(Job):
         self._params_sent = False
         self._left: State | None = None  # the state a transition was sent from, until it is left
         self._cancelled = False
-
-    def nodes(self) -> Iterator[NodeJob]:
-        yield self
 
     def feedback(self) -> str:
         return f"{self.node}: {self.step}"
@@ -200,10 +194,6 @@ class NodeJob(Job):
 class _Composite(Job):
     def __init__(self, children: list[Job]) -> None:
         self.children = children
-
-    def nodes(self) -> Iterator[NodeJob]:
-        for child in self.children:
-            yield from child.nodes()
 
     def cancel(self) -> None:
         for child in self.children:
