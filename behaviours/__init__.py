@@ -1,1 +1,40 @@
-"""Mode behaviours for py_trees (installed as ``sm_bt.behaviours``)."""
+"""Mode behaviours for py_trees (installed as ``sm_bt.behaviours``).
+
+Every behaviour finds the embedded :class:`~sm_bt.ModeManager` through
+``tree.setup(manager=manager)`` and never blocks a tick:
+
+* :class:`ChangeMode`, :class:`ChangeState`: request a change, RUNNING until confirmed
+* :class:`ModeIs`, :class:`StateIs`: checks (SUCCESS/FAILURE in one tick)
+* :class:`WaitForMode`, :class:`WaitForState`: wait until the part gets there
+* :class:`OnDivergence`: a condition on a part straying from its target
+* :class:`ModesToBlackboard`: every part's state and mode under ``/system_modes``
+* :class:`Reconfigure`: let a :class:`~sm_bt.reasoner.Reasoner` pick and request the mode
+* idioms: :func:`hold_mode` (context switch), :func:`switch_on_divergence` (rule in the tree)
+"""
+
+from sm_bt.behaviours.blackboard import ModesToBlackboard, PartStatus
+from sm_bt.behaviours.change import TRANSITIONS, ChangeMode, ChangeState
+from sm_bt.behaviours.checks import ModeIs, StateIs, WaitForMode, WaitForState
+from sm_bt.behaviours.divergence import OnDivergence
+from sm_bt.behaviours.idioms import HoldMode, hold_mode, switch_on_divergence
+from sm_bt.behaviours.manager_access import ManagerBehaviour, NotSetUp
+from sm_bt.behaviours.reconfigure import Reconfigure
+
+__all__ = [
+    "TRANSITIONS",
+    "ChangeMode",
+    "ChangeState",
+    "HoldMode",
+    "ManagerBehaviour",
+    "ModeIs",
+    "ModesToBlackboard",
+    "NotSetUp",
+    "OnDivergence",
+    "PartStatus",
+    "Reconfigure",
+    "StateIs",
+    "WaitForMode",
+    "WaitForState",
+    "hold_mode",
+    "switch_on_divergence",
+]

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from sm_bt import bundled, demo
+from sm_bt import bundled, demo, monitor_cli
 from sm_bt.model.errors import ModelError
 from sm_bt.model.loader import load_model
 from sm_bt.model.types import (
@@ -274,6 +274,12 @@ COMMANDS: list[Command] = [
     Command("demo", "run the MROS pilot through a mode sequence on simulated nodes", demo.add_arguments, demo.run,
             description="The pilot on the embedded simulated backend: normal mode, a refused performance "
                         "request, laser failure handled by a rule, energy saving, recharge, back to normal."),
+    Command("monitor", "show target and actual state/mode of every part as it changes (simulated nodes)",
+            monitor_cli.add_arguments, monitor_cli.run,
+            description="The mode monitor: part, target state, actual state, target mode, actual mode; systems "
+                        "then nodes, (*) on inferred values, divergences highlighted. The model's nodes run on "
+                        "the embedded simulated backend; --change requests are made in turn. Watching live "
+                        "ROS nodes (--ros) comes with the ROS backend."),
 ]
 
 

@@ -2,18 +2,49 @@
 
 Systems first, then nodes, each alphabetically, as the reference's monitor; ``(*)`` marks values
 that were inferred rather than reported, and ``!`` marks a part that diverges from its target.
+:func:`render_text` is the plain layout (logs, the demo), :func:`render_rich` the coloured one
+(error divergences bold red, transient ones yellow), :func:`to_json` a machine-readable snapshot,
+and :class:`Monitor` keeps either up to date from the manager's events.
 """
 
 from __future__ import annotations
 
+import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any, TextIO
 
+from rich import box
+from rich.console import Console
+from rich.live import Live
+from rich.table import Table
+from rich.text import Text
+
+from sm_bt.engine.events import Cause, Event, EventKind
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import NodePart
+
+INFERRED = "(*)"
+#: Row styles: divergences that rules/recovery (or a human) must deal with, and ones that are settling.
+ERROR_STYLE = "bold red"
+TRANSIENT_STYLE = "yellow"
+#: The events that can change a row; requests, rules and failures show through these.
+_ROW_EVENTS = frozenset({EventKind.ACTUAL, EventKind.TARGET, EventKind.DIVERGENCE})
+
+JsonSnapshot = dict[str, Any]
 
 
 @dataclass(frozen=True)
 class Row:
+    """One part as the monitor shows it.
+
+    ``actual_state``/``actual_mode`` carry the ``(*)`` marker for display; ``raw_state``/``raw_mode``
+    are the same values without it, with ``state_inferred``/``mode_inferred`` separate, for
+    programs. ``cause`` and ``since`` describe the divergence (``None`` when on target), ``error``
+    is true when it is beyond the grace period and unexplained (fault or override).
+    """
+
     part: str
     kind: str
     target_state: str
@@ -21,6 +52,13 @@ class Row:
     target_mode: str
     actual_mode: str
     diverges: bool
+    raw_state: str = ""
+    raw_mode: str = ""
+    state_inferred: bool = False
+    mode_inferred: bool = False
+    cause: Cause | None = None
+    since: float | None = None
+    error: bool = False
 
 
 def snapshot(manager: ModeManager) -> list[Row]:
@@ -31,8 +69,9 @@ def snapshot(manager: ModeManager) -> list[Row]:
     for part in ordered:
         actual = manager.actual(part.name)
         target = manager.target(part.name)
-        state = actual.state.label + ("(*)" if actual.state_inferred else "")
-        mode = (actual.mode + ("(*)" if actual.mode_inferred else "")) if actual.mode else ""
+        divergence = manager.divergence(part.name)
+        state = actual.state.label + (INFERRED if actual.state_inferred else "")
+        mode = (actual.mode + (INFERRED if actual.mode_inferred else "")) if actual.mode else ""
         rows.append(Row(
             part=part.name,
             kind=part.kind.value,
@@ -40,7 +79,14 @@ def snapshot(manager: ModeManager) -> list[Row]:
             actual_state=state,
             target_mode=(target.mode or "") if target else "",
             actual_mode=mode,
-            diverges=manager.divergence(part.name) is not None,
+            diverges=divergence is not None,
+            raw_state=actual.state.label,
+            raw_mode=actual.mode or "",
+            state_inferred=actual.state_inferred,
+            mode_inferred=bool(actual.mode) and actual.mode_inferred,
+            cause=divergence.cause if divergence else None,
+            since=divergence.since if divergence else None,
+            error=divergence is not None and divergence.is_error,
         ))
     return rows
 
@@ -60,3 +106,159 @@ def render_text(rows: list[Row]) -> str:
         lines.append(mark + "  ".join(t.ljust(widths[i]) for i, t in enumerate(text)).rstrip())
     lines.append(" (*) = inferred    ! = diverges from target")
     return "\n".join(lines)
+
+
+def row_style(row: Row) -> str | None:
+    """The highlight of a row: errors stand out, settling divergences only draw the eye."""
+    if not row.diverges:
+        return None
+    return ERROR_STYLE if row.error else TRANSIENT_STYLE
+
+
+def legend() -> Text:
+    """The caption: what ``(*)`` and the two highlights mean."""
+    return Text.assemble((INFERRED, "dim"), " inferred   ", ("! error", ERROR_STYLE), " (fault, override)   ",
+                         ("~ settling", TRANSIENT_STYLE), " (in flight, grace)")
+
+
+def _value(raw: str, inferred: bool) -> Text:
+    text = Text(raw)
+    if raw and inferred:
+        text.append(INFERRED, style="dim")
+    return text
+
+
+def render_rich(rows: list[Row], *, title: str | None = None) -> Table:
+    """The table for a rich console: a ``systems`` section then a ``nodes`` section, ``(*)`` kept
+    (dimmed), each diverging row styled by :func:`row_style`, and the legend as caption."""
+    table = Table(title=title, caption=legend(), box=box.SIMPLE_HEAD, caption_justify="left",
+                  pad_edge=False)
+    table.add_column("", no_wrap=True, min_width=1)
+    # Narrow terminals fold long names rather than cut them: every character of a mode name counts.
+    for header in ("part", "target state", "actual state", "target mode", "actual mode"):
+        table.add_column(header, overflow="fold")
+    kind = ""
+    for index, row in enumerate(rows):
+        if row.kind != kind:
+            kind = row.kind
+            table.add_row("", Text(f"{kind}s", style="bold"))
+        mark = "" if not row.diverges else ("!" if row.error else "~")
+        section_ends = index + 1 < len(rows) and rows[index + 1].kind != row.kind
+        table.add_row(mark, row.part, row.target_state, _value(row.raw_state, row.state_inferred),
+                      row.target_mode, _value(row.raw_mode, row.mode_inferred),
+                      style=row_style(row), end_section=section_ends)
+    return table
+
+
+def to_json(rows: list[Row], time: float) -> JsonSnapshot:
+    """A JSON-serialisable snapshot at clock ``time``: raw values (``null`` when absent), inferred
+    flags, and the divergence (``null`` when on target). Times are rounded to the microsecond."""
+    return {"time": round(time, 6), "parts": [_json_row(row) for row in rows]}
+
+
+def _json_row(row: Row) -> dict[str, Any]:
+    divergence = None
+    if row.cause is not None:
+        since = None if row.since is None else round(row.since, 6)
+        divergence = {"cause": row.cause.value, "since": since, "error": row.error}
+    return {
+        "part": row.part,
+        "kind": row.kind,
+        "target_state": row.target_state or None,
+        "target_mode": row.target_mode or None,
+        "actual_state": row.raw_state,
+        "actual_mode": row.raw_mode or None,
+        "state_inferred": row.state_inferred,
+        "mode_inferred": row.mode_inferred,
+        "divergence": divergence,
+    }
+
+
+class Monitor:
+    """Keeps a view of ``manager`` up to date: a rich table on a :class:`Console`, or JSON Lines on
+    a text stream.
+
+    The manager's callbacks run inside its lock, possibly in another thread, so they only mark
+    the view dirty; the owner calls :meth:`refresh` (from its loop) to render, and only a change
+    of the rows renders anything. ``title`` is shown above the table with the clock time.
+    """
+
+    def __init__(self, manager: ModeManager, output: Console | TextIO, *, title: str | None = None) -> None:
+        self.manager = manager
+        self.output = output
+        self.title = title
+        #: How many times the view was rendered (tables printed, live updates, JSON lines).
+        self.renders = 0
+        self._dirty = True
+        self._last: list[Row] | None = None
+        self._live: Live | None = None
+        self._subscription = manager.subscribe(self._changed, kinds=_ROW_EVENTS)
+
+    @property
+    def json(self) -> bool:
+        return not isinstance(self.output, Console)
+
+    @property
+    def dirty(self) -> bool:
+        """Something may have changed since the last render."""
+        return self._dirty
+
+    def _changed(self, event: Event) -> None:
+        self._dirty = True
+
+    def table(self, rows: list[Row] | None = None) -> Table:
+        """The current table (``rows`` if given), titled with the clock time."""
+        now = f"t = {self.manager.clock.now():.2f} s"
+        title = f"{self.title} at {now}" if self.title else now
+        return render_rich(snapshot(self.manager) if rows is None else rows, title=title)
+
+    def print_table(self) -> None:
+        """Print the current view now, changed or not (a table, or one JSON line)."""
+        self._dirty = False
+        rows = snapshot(self.manager)
+        self._last = rows
+        self._show(rows, live=False)
+
+    def refresh(self) -> bool:
+        """Render if the rows changed since the last render; return whether it did."""
+        if not self._dirty:
+            return False
+        self._dirty = False  # before the snapshot: a change during it marks dirty again
+        rows = snapshot(self.manager)
+        if rows == self._last:
+            return False
+        self._last = rows
+        self._show(rows, live=self._live is not None)
+        return True
+
+    @contextmanager
+    def live(self) -> Iterator[Monitor]:
+        """Show the table in place (rich ``Live``, refreshed only by :meth:`refresh`). In JSON mode
+        there is nothing to keep in place: :meth:`refresh` prints lines as usual."""
+        if not isinstance(self.output, Console):
+            yield self
+            return
+        self._dirty = False
+        self._last = snapshot(self.manager)
+        with Live(self.table(self._last), console=self.output, auto_refresh=False) as live:
+            self.renders += 1
+            self._live = live
+            try:
+                yield self
+            finally:
+                self._live = None
+
+    def close(self) -> None:
+        """Stop following the manager."""
+        self._subscription.cancel()
+
+    def _show(self, rows: list[Row], *, live: bool) -> None:
+        self.renders += 1
+        if isinstance(self.output, Console):
+            if live and self._live is not None:
+                self._live.update(self.table(rows), refresh=True)
+            else:
+                self.output.print(self.table(rows))
+        else:
+            self.output.write(json.dumps(to_json(rows, self.manager.clock.now())) + "\n")
+            self.output.flush()

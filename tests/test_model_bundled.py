@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import sm_bt.models as bundled
 
+import sm_bt.models as bundled
 from sm_bt.model import (
     DEFAULT_MODE,
     ModelError,

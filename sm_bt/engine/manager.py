@@ -37,19 +37,22 @@ class ModeManager:
 
     ``request_timeout`` bounds every request (seconds of the backend's clock), ``grace_period``
     is how long a divergence must last, with no request working on it, before rules or recovery
-    act, and ``recovery_attempts`` bounds how often a node is restored before it is reported as
-    failed. ``rules=False``/``recovery=False`` switch those reactions off.
+    act, and ``recovery_attempts`` bounds how often a node is restored within ``recovery_window``
+    seconds before it is reported as failed (a node that comes back and fails again at once
+    still runs out of attempts; one that stays up for the window has them all again).
+    ``rules=False``/``recovery=False`` switch those reactions off.
     """
 
     def __init__(self, model: Model, backend: Backend, *, request_timeout: float = 30.0,
-                 grace_period: float = 2.0, recovery_attempts: int = 3, rules: bool = True,
-                 recovery: bool = True) -> None:
+                 grace_period: float = 2.0, recovery_attempts: int = 3, recovery_window: float = 60.0,
+                 rules: bool = True, recovery: bool = True) -> None:
         self.model = model
         self.backend = backend
         self.clock = backend.clock
         self.request_timeout = request_timeout
         self.grace_period = grace_period
         self.recovery_attempts = recovery_attempts
+        self.recovery_window = recovery_window
         self.rules_enabled = rules
         self.recovery_enabled = recovery
         self._lock = threading.RLock()
@@ -61,7 +64,7 @@ class ModeManager:
         self._executions: dict[int, Execution] = {}
         self._divergences: dict[str, Divergence] = {}
         self._since: dict[str, float] = {}
-        self._attempts: dict[str, int] = {}
+        self._attempts: dict[str, list[float]] = {}  # when recovery last restored each node
         self._failed: set[str] = set()
         self._last_mode: dict[str, str] = {}  # the last active mode asked for, kept over deactivation
         self._subscriptions: list[Subscription] = []
@@ -160,6 +163,29 @@ class ModeManager:
                 return self._refuse(part, description, str(error))
             mode = self._mode_for_activation(part) if goal is State.ACTIVE else None
             return self._start(part, StateMode(goal, mode), description, Origin.USER, timeout)
+
+    def change_to(self, part: str, target: StateMode | str, *, timeout: float | None = None) -> Request:
+        """Ask for ``part`` to reach ``target`` (``"active.FAST"``, ``"inactive"``, a
+        :class:`StateMode`), whatever it is in now: the plan takes every lifecycle step needed.
+        Used to put a part back where it was (for instance after holding a mode). Returns at once."""
+        with self._entry():
+            try:
+                wanted = target if isinstance(target, StateMode) else StateMode.parse(target)
+            except ValueError as error:
+                return self._refuse(part, f"change_to {part} {target}", str(error))
+            description = f"change_to {part} {wanted}"
+            if part not in self.model.parts:
+                return self._refuse(part, description, self._unknown_part(part))
+            if wanted.state not in (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE):
+                return self._refuse(part, description, f"{wanted.state.label} is not a state to ask for "
+                                    "(unconfigured, inactive or active)")
+            if wanted.state is State.ACTIVE:
+                resolved = self._resolve_mode(part, wanted.mode or "")
+                if resolved is None:
+                    modes = ", ".join(self.available_modes(part))
+                    return self._refuse(part, description, f"unknown mode {wanted.mode!r} of {part} (modes: {modes})")
+                wanted = StateMode(State.ACTIVE, resolved)
+            return self._start(part, wanted, description, Origin.USER, timeout)
 
     def subscribe(self, callback: Observer, part: str | Iterable[str] | None = None,
                   kinds: Iterable[EventKind] | None = None) -> Subscription:
@@ -389,7 +415,6 @@ class ModeManager:
             found[part] = Divergence(part, target, actual, since, cause)
         for part in self._divergences:
             if part not in found:
-                self._attempts.pop(part, None)
                 self._failed.discard(part)
                 self._emit(EventKind.DIVERGENCE, part, f"{part} is back on target {self._inference.target(part)}")
         for part, new in found.items():
@@ -453,14 +478,16 @@ class ModeManager:
                 continue
             if self._inference.target(node) != divergence.target or node in self._busy_nodes():
                 continue  # a rule above has just re-targeted it
-            attempts = self._attempts.get(node, 0)
+            now = self.clock.now()
+            recent = [t for t in self._attempts.get(node, []) if now - t < self.recovery_window]
+            attempts = len(recent)
             if attempts >= self.recovery_attempts:
                 self._failed.add(node)
                 message = f"gave up restoring {node} to {divergence.target} after {attempts} attempts"
                 log.error(message)
                 self._emit(EventKind.FAILED, node, message, divergence=divergence)
                 continue
-            self._attempts[node] = attempts + 1
+            self._attempts[node] = [*recent, now]
             self._start(node, divergence.target, f"restore {node} to {divergence.target}", Origin.RECOVERY, None)
 
     def _busy_nodes(self) -> set[str]:

@@ -1,0 +1,114 @@
+"""Behaviours that change a part: :class:`ChangeMode` and :class:`ChangeState`.
+
+Both work the same way for systems and nodes (the tree need not know which a part is): the
+request is made in ``initialise``, each tick reports its progress without blocking, and an
+interruption withdraws it.
+"""
+
+from __future__ import annotations
+
+from py_trees.common import Status
+
+from sm_bt.behaviours.manager_access import ManagerBehaviour
+from sm_bt.engine.lifecycle import Transition
+from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.requests import Request
+
+#: The lifecycle transitions a tree may ask for, by label.
+TRANSITIONS = ("configure", "activate", "deactivate", "cleanup", "shutdown")
+
+
+class _RequestBehaviour(ManagerBehaviour):
+    """Common life of a behaviour that owns one manager request."""
+
+    def __init__(self, name: str, part: str, timeout: float | None) -> None:
+        super().__init__(name)
+        if timeout is not None and timeout <= 0:
+            raise ValueError(f"{name}: timeout must be positive, not {timeout}")
+        self.part = part
+        self.timeout = timeout
+        self.request: Request | None = None
+
+    def _make_request(self, manager: ModeManager) -> Request:
+        raise NotImplementedError
+
+    def initialise(self) -> None:
+        """Send the request to the manager (it returns at once)."""
+        self.request = self._make_request(self.manager)
+        self.feedback_message = f"requested: {self.request.description}"
+
+    def update(self) -> Status:
+        """RUNNING while the manager works on the request (feedback: the step in progress),
+        SUCCESS once the manager confirmed the part reached the target, FAILURE with the
+        manager's reason (refused transition, rejected parameters, timeout, preempted, ...)."""
+        request = self.request
+        if request is None:  # ticked without initialise: py_trees never does this
+            return Status.INVALID
+        if not request.done:
+            self.feedback_message = request.feedback
+            return Status.RUNNING
+        if request.succeeded:
+            self.feedback_message = f"{self.part} is {request.target} ({request.elapsed or 0.0:.2f} s)"
+            return Status.SUCCESS
+        self.feedback_message = request.reason
+        self.logger.debug(f"{self.qualified_name}: {request.description} failed: {request.reason}")
+        return Status.FAILURE
+
+    def terminate(self, new_status: Status) -> None:
+        """Interrupted (INVALID) while the request is in flight: withdraw it, so the manager
+        sends no further steps and restores the previous targets."""
+        if new_status is Status.INVALID and self.request is not None and not self.request.done:
+            self.request.cancel()
+            self.feedback_message = f"cancelled: {self.request.description}"
+
+
+class ChangeMode(_RequestBehaviour):
+    """Put ``part`` (a system or a node) in ``mode``, active.
+
+    * ``initialise``: request the change (``ModeManager.change_mode``)
+    * ``update``: RUNNING while in progress, SUCCESS when the manager confirms the part's
+      inferred actual state is ``active.<mode>``, FAILURE with the manager's reason otherwise
+    * ``terminate``: withdraw the request when interrupted while RUNNING
+
+    ``timeout`` (seconds of the manager's clock) bounds the whole change; ``None`` takes the
+    manager's ``request_timeout``. An unknown part or mode is an error at ``setup``.
+    """
+
+    def __init__(self, name: str, part: str, mode: str, timeout: float | None = None) -> None:
+        super().__init__(name, part, timeout)
+        self.mode = mode
+
+    def validate(self, manager: ModeManager) -> None:
+        self._check_mode(manager, self.part, self.mode)
+
+    def _make_request(self, manager: ModeManager) -> Request:
+        return manager.change_mode(self.part, self.mode, timeout=self.timeout)
+
+
+class ChangeState(_RequestBehaviour):
+    """Take ``part`` (a system or a node) through a lifecycle ``transition``: ``"configure"``,
+    ``"activate"``, ``"deactivate"``, ``"cleanup"`` or ``"shutdown"``.
+
+    * ``initialise``: request it (``ModeManager.change_state``); a part already in the
+      transition's goal state succeeds at once, and activation keeps the last mode asked for
+    * ``update``: RUNNING while in progress, SUCCESS when the part is confirmed in the goal
+      state, FAILURE with the manager's reason (for instance a transition invalid from the
+      part's current state, or one a node refused)
+    * ``terminate``: withdraw the request when interrupted while RUNNING
+    """
+
+    def __init__(self, name: str, part: str, transition: str | Transition, timeout: float | None = None) -> None:
+        super().__init__(name, part, timeout)
+        label = transition.label if isinstance(transition, Transition) else transition
+        if label not in TRANSITIONS:
+            raise ValueError(f"{name}: cannot request transition {label!r} (one of: {', '.join(TRANSITIONS)})")
+        self.transition = label
+
+    def validate(self, manager: ModeManager) -> None:
+        self._check_part(manager, self.part)
+
+    def _make_request(self, manager: ModeManager) -> Request:
+        return manager.change_state(self.part, self.transition, timeout=self.timeout)
+
+
+__all__ = ["TRANSITIONS", "ChangeMode", "ChangeState"]

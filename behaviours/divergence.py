@@ -1,0 +1,54 @@
+"""``OnDivergence``: a condition that fires when a part strays from its target."""
+
+from __future__ import annotations
+
+import py_trees
+from py_trees.common import Status
+
+from sm_bt.behaviours.manager_access import ManagerBehaviour
+from sm_bt.engine.manager import ModeManager
+
+
+class OnDivergence(ManagerBehaviour):
+    """Does ``part`` (or, with ``part=None``, any part) diverge from its target?
+
+    SUCCESS when the manager reports a divergence that is an error: it lasted beyond the grace
+    period and no request explains it (a node left its target by itself, or was changed behind
+    the manager's back); FAILURE otherwise. Never RUNNING, so it fits guards and selectors.
+
+    On SUCCESS the :class:`~sm_bt.engine.events.Divergence` (``part``, ``target``, ``actual``,
+    ``since`` on the manager's clock, ``cause``) is written to the blackboard under
+    ``variable_name`` for the recovery subtree to read; with ``part=None`` it is the lowest
+    diverging part (a node before its systems: the likely cause). On FAILURE the variable is
+    removed, so a stale divergence is never read. ``errors_only=False`` also fires on transient
+    divergences (a request in flight, the grace period).
+    """
+
+    def __init__(self, name: str, part: str | None = None, variable_name: str = "divergence",
+                 errors_only: bool = True) -> None:
+        super().__init__(name)
+        self.part = part
+        self.variable_name = variable_name
+        self.errors_only = errors_only
+        self.blackboard = self.attach_blackboard_client(name)
+        self.blackboard.register_key(variable_name, access=py_trees.common.Access.WRITE)
+
+    def validate(self, manager: ModeManager) -> None:
+        if self.part is not None:
+            self._check_part(manager, self.part)
+
+    def update(self) -> Status:
+        """SUCCESS and write the divergence if there is one, FAILURE (and clear it) if not."""
+        found = self.manager.divergences(errors_only=self.errors_only)
+        if self.part is not None:
+            found = [d for d in found if d.part == self.part]
+        if not found:
+            self.blackboard.unset(self.variable_name)
+            self.feedback_message = f"{self.part or 'every part'} on target"
+            return Status.FAILURE
+        divergence = found[0]
+        self.blackboard.set(self.variable_name, divergence)
+        since = self.manager.clock.now() - divergence.since
+        more = f" (+{len(found) - 1} more)" if len(found) > 1 else ""
+        self.feedback_message = f"{divergence} for {since:.1f} s{more}"
+        return Status.SUCCESS

@@ -1,0 +1,132 @@
+"""Tree idioms for modes: hold a mode while a subtree runs; switch mode when a part diverges.
+
+py_trees idioms are functions that return a subtree; these two follow that style.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import py_trees
+from py_trees.common import Status
+
+from sm_bt.behaviours.change import ChangeMode
+from sm_bt.behaviours.checks import WaitForMode
+from sm_bt.behaviours.divergence import OnDivergence
+from sm_bt.behaviours.manager_access import ManagerBehaviour
+from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.requests import Request
+from sm_bt.model.states import State, StateMode
+
+log = logging.getLogger("sm_bt.behaviours")
+
+
+class HoldMode(ManagerBehaviour):
+    """A context switch (py_trees' context-switching pattern): puts ``part`` in ``mode`` and
+    puts it back when it stops, whatever the reason.
+
+    * ``initialise``: remember the part's target, request ``mode``
+    * ``update``: RUNNING while the change is in progress and for as long as it holds the mode
+      (it never succeeds by itself); FAILURE if the change fails
+    * ``terminate`` (SUCCESS of the work beside it, FAILURE, or interruption): withdraw the
+      change if still in flight and request the remembered target back, unless somebody else
+      asked for another target meanwhile (their request wins, nothing is restored)
+
+    Use it through :func:`hold_mode`, which runs it in a parallel next to the work.
+    """
+
+    def __init__(self, name: str, part: str, mode: str, timeout: float | None = None) -> None:
+        super().__init__(name)
+        self.part = part
+        self.mode = mode
+        self.timeout = timeout
+        self.request: Request | None = None
+        self.restore_request: Request | None = None
+        self._held: StateMode | None = None
+        self._previous: StateMode | None = None
+
+    def validate(self, manager: ModeManager) -> None:
+        self._held = StateMode(State.ACTIVE, self._check_mode(manager, self.part, self.mode))
+
+    def initialise(self) -> None:
+        """Remember the current target and request the mode."""
+        self._previous = self.manager.target(self.part)
+        self.restore_request = None
+        self.request = self.manager.change_mode(self.part, self.mode, timeout=self.timeout)
+        self.feedback_message = f"requested {self._held}"
+
+    def update(self) -> Status:
+        """RUNNING while changing and while holding; FAILURE if the change fails."""
+        request = self.request
+        if request is None:
+            return Status.INVALID
+        if not request.done:
+            self.feedback_message = request.feedback
+            return Status.RUNNING
+        if not request.succeeded:
+            self.feedback_message = request.reason
+            return Status.FAILURE
+        target = self.manager.target(self.part)
+        if target == self._held:
+            self.feedback_message = f"holding {self.part} in {self._held}"
+        else:
+            self.feedback_message = f"{self.part} was re-targeted to {target}: it will not be restored"
+        return Status.RUNNING
+
+    def terminate(self, new_status: Status) -> None:
+        """Give the part back: withdraw the change if in flight, request the previous target."""
+        request, self.request = self.request, None
+        if request is None:
+            return
+        ours = self.manager.target(self.part) == self._held
+        if not request.done:
+            request.cancel()
+        previous = self._previous
+        if not ours or previous is None or previous == self._held:
+            return
+        self.restore_request = self.manager.change_to(self.part, previous)
+        self.feedback_message = f"restoring {self.part} to {previous}"
+        self.restore_request.add_done_callback(_report_restore)
+
+
+def _report_restore(request: Request) -> None:
+    if request.succeeded:
+        log.info("restored: %s", request.description)
+    else:
+        log.warning("could not restore (%s): %s", request.description, request.reason)
+
+
+def hold_mode(name: str, part: str, mode: str, child: py_trees.behaviour.Behaviour,
+              timeout: float | None = None) -> py_trees.behaviour.Behaviour:
+    """Run ``child`` with ``part`` held in ``mode``; restore the part's previous target when the
+    subtree ends, whether ``child`` succeeded, failed or was interrupted.
+
+    Returns ``Parallel(SuccessOnOne)`` of a :class:`HoldMode` and ``Sequence(memory=True)`` of
+    ``WaitForMode(part, mode)`` then ``child``: the child starts once the part is confirmed in
+    the mode, the subtree has the child's result, and it fails if the mode cannot be reached.
+    """
+    work = py_trees.composites.Sequence(f"{name}: work", memory=True, children=[
+        WaitForMode(f"In {mode}?", part, mode),
+        child,
+    ])
+    return py_trees.composites.Parallel(name, policy=py_trees.common.ParallelPolicy.SuccessOnOne(), children=[
+        HoldMode(f"Hold {part} in {mode}", part, mode, timeout=timeout),
+        work,
+    ])
+
+
+def switch_on_divergence(name: str, part: str | None, system: str, mode: str,
+                         timeout: float | None = None) -> py_trees.behaviour.Behaviour:
+    """"When ``part`` diverges from its target, put ``system`` in ``mode``": a rule, in the tree.
+
+    Returns ``Sequence(memory=True)`` of ``OnDivergence(part)`` then ``ChangeMode(system, mode)``.
+    Place it in a ``Selector(memory=False)`` of contingencies (with a fallback child): the
+    selector re-checks it every tick, and once the divergence is seen the memory sequence keeps
+    the mode change running even though switching clears the divergence. FAILURE when there is
+    no divergence, else the mode change's result.
+    """
+    watched = part or "any part"
+    return py_trees.composites.Sequence(name, memory=True, children=[
+        OnDivergence(f"{watched} diverges?", part),
+        ChangeMode(f"Switch to {mode}", system, mode, timeout=timeout),
+    ])

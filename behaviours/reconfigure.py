@@ -1,0 +1,56 @@
+"""``Reconfigure``: a reasoner chooses the mode, the tree requests it."""
+
+from __future__ import annotations
+
+from py_trees.common import Status
+
+from sm_bt.behaviours.change import _RequestBehaviour
+from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.requests import Request
+from sm_bt.reasoner import Reasoner
+
+
+class Reconfigure(_RequestBehaviour):
+    """Ask ``reasoner`` for the best realisable mode of its part and put the part in it.
+
+    * ``initialise``: the reasoner decides from the component statuses it holds and, unless the
+      part is already targeted at that mode, requests it (``Reasoner.reconfigure``)
+    * ``update``: SUCCESS when nothing needed changing or the change is confirmed; RUNNING while
+      it is in progress; FAILURE when no design is realisable (feedback: the reasoner's
+      explanation) or the change failed (the manager's reason)
+    * ``terminate``: withdraw the change when interrupted while RUNNING
+
+    Tick it when the statuses change (``reasoner.changed``), for instance behind a condition.
+    """
+
+    def __init__(self, name: str, reasoner: Reasoner, timeout: float | None = None) -> None:
+        super().__init__(name, reasoner.part, timeout)
+        self.reasoner = reasoner
+        self.decision_text = ""
+
+    def validate(self, manager: ModeManager) -> None:
+        self._check_part(manager, self.part)
+        try:
+            self.reasoner.check(manager.model)
+        except ValueError as error:
+            raise ValueError(f"{self.qualified_name}: {error}") from None
+
+    def initialise(self) -> None:
+        """Decide, then request the chosen mode if the part is not already targeted at it."""
+        self.request = self.reasoner.reconfigure(self.manager, timeout=self.timeout)
+        decision = self.reasoner.last_decision
+        self.decision_text = decision.explanation if decision is not None else ""
+        self.feedback_message = self.decision_text
+
+    def update(self) -> Status:
+        """SUCCESS (nothing to change, or confirmed), RUNNING, or FAILURE (see the class)."""
+        if self.request is not None:
+            return super().update()
+        decision = self.reasoner.last_decision
+        self.feedback_message = self.decision_text
+        if decision is None or decision.design is None:
+            return Status.FAILURE
+        return Status.SUCCESS
+
+    def _make_request(self, manager: ModeManager) -> Request:  # unused: initialise asks the reasoner
+        raise NotImplementedError

@@ -1,0 +1,174 @@
+"""The pilot's mission actions and sensors, over the simulated world.
+
+``tree.setup(manager=..., world=...)`` hands them the mode manager and the
+:class:`~sm_bt.sim.world.World`. :class:`NavigateTo` is where modes show: the robot drives at the
+speed controller_server's parameters give it (as the node reports them to the manager), and it
+cannot move without an active controller and an active laser source.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import py_trees
+from py_trees.common import Access, Status
+
+from sm_bt.behaviours.manager_access import ManagerBehaviour
+from sm_bt.engine.manager import ModeManager
+from sm_bt.model.states import State
+from sm_bt.sim.world import World
+
+#: Blackboard keys the pilot's sensors write (booleans: True = component OK).
+BATTERY_LEVEL = "/battery/level"
+BATTERY_OK = "/components/battery"
+LASER_SCANS_OK = "/components/laser_scans"
+
+
+def _world(behaviour: py_trees.behaviour.Behaviour, kwargs: dict[str, Any]) -> World:
+    world = kwargs.get("world")
+    if not isinstance(world, World):
+        raise RuntimeError(f"{behaviour.qualified_name}: no world; set the tree up with "
+                           "tree.setup(manager=manager, world=World())")
+    return world
+
+
+class _WorldBehaviour(ManagerBehaviour):
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self._world: World | None = None
+
+    def setup(self, **kwargs: Any) -> None:
+        super().setup(**kwargs)
+        self._world = _world(self, kwargs)
+
+    @property
+    def world(self) -> World:
+        if self._world is None:
+            raise RuntimeError(f"{self.qualified_name}: not set up (tree.setup(manager=..., world=...))")
+        return self._world
+
+
+class NavigateTo(_WorldBehaviour):
+    """Drive to ``waypoint``.
+
+    * ``initialise``: start measuring time (the manager's clock)
+    * ``update``: advance the robot by speed x elapsed time; RUNNING on the way (feedback:
+      distance and speed, or why it is stopped), SUCCESS on arrival. Never FAILURE: a robot
+      without laser or controller waits, as Nav2 does, for the mode to give them back.
+
+    Speed is ``speed_parameter`` of ``controller`` as that node reports it, while the controller
+    and at least one of ``lasers`` are active; otherwise the robot stands still.
+    """
+
+    def __init__(self, name: str, waypoint: str, controller: str = "controller_server",
+                 speed_parameter: str = "FollowPath.max_vel_x",
+                 lasers: tuple[str, ...] = ("laser_resender", "pointcloud_to_laser")) -> None:
+        super().__init__(name)
+        self.waypoint = waypoint
+        self.controller = controller
+        self.speed_parameter = speed_parameter
+        self.lasers = lasers
+        self._last = 0.0
+
+    def validate(self, manager: ModeManager) -> None:
+        for part in (self.controller, *self.lasers):
+            self._check_part(manager, part)
+
+    def setup(self, **kwargs: Any) -> None:
+        super().setup(**kwargs)
+        if self.waypoint not in self.world.waypoints:
+            raise ValueError(f"{self.qualified_name}: unknown waypoint {self.waypoint!r} "
+                             f"(waypoints: {', '.join(self.world.waypoints)})")
+
+    def speed(self) -> tuple[float, str]:
+        """The speed the robot can drive at now, and why it is zero when it is."""
+        manager = self.manager
+        if manager.actual(self.controller).state is not State.ACTIVE:
+            return 0.0, f"{self.controller} is {manager.actual(self.controller)}"
+        if not any(manager.actual(laser).state is State.ACTIVE for laser in self.lasers):
+            return 0.0, "no laser scan (" + ", ".join(f"{n} {manager.actual(n)}" for n in self.lasers) + ")"
+        value = manager.observation(self.controller).parameters.get(self.speed_parameter)
+        if not isinstance(value, int | float) or isinstance(value, bool):
+            return 0.0, f"{self.controller} has no {self.speed_parameter}"
+        return float(value), ""
+
+    def initialise(self) -> None:
+        self._last = self.manager.clock.now()
+
+    def update(self) -> Status:
+        now = self.manager.clock.now()
+        elapsed, self._last = now - self._last, now
+        speed, why = self.speed()
+        if self.world.drive(self.waypoint, speed * elapsed):
+            self.feedback_message = f"at {self.waypoint}"
+            return Status.SUCCESS
+        distance = self.world.distance_to(self.waypoint)
+        self.feedback_message = (f"{distance:.1f} m to {self.waypoint} at {speed:g} m/s" if speed
+                                 else f"stopped {distance:.1f} m before {self.waypoint}: {why}")
+        return Status.RUNNING
+
+
+class Recharge(_WorldBehaviour):
+    """Charge for ``duration`` seconds (the pilot's 10 s), then the battery is full.
+
+    RUNNING while charging, SUCCESS when done.
+    """
+
+    def __init__(self, name: str, duration: float = 10.0) -> None:
+        super().__init__(name)
+        self.duration = duration
+        self._started = 0.0
+
+    def initialise(self) -> None:
+        self._started = self.manager.clock.now()
+
+    def update(self) -> Status:
+        elapsed = self.manager.clock.now() - self._started
+        if elapsed >= self.duration:
+            self.world.recharge()
+            self.feedback_message = "battery full"
+            return Status.SUCCESS
+        self.feedback_message = f"charging: {self.duration - elapsed:.1f} s left"
+        return Status.RUNNING
+
+
+class BatteryToBlackboard(_WorldBehaviour):
+    """The pilot's battery monitor: the level, and the component status with hysteresis
+    (failed below ``low``, recovered above ``recovered``), on the blackboard. Always SUCCESS."""
+
+    def __init__(self, name: str = "Battery to Blackboard", low: float = 0.5, recovered: float = 0.8) -> None:
+        super().__init__(name)
+        self.low = low
+        self.recovered = recovered
+        self.blackboard = self.attach_blackboard_client(name)
+        self.blackboard.register_key(BATTERY_LEVEL, access=Access.WRITE)
+        self.blackboard.register_key(BATTERY_OK, access=Access.WRITE)
+        self._ok: bool | None = None
+
+    def update(self) -> Status:
+        level = self.world.battery
+        if self._ok is None:
+            self._ok = level >= self.low
+        elif self._ok and level < self.low:
+            self._ok = False
+        elif not self._ok and level > self.recovered:
+            self._ok = True
+        self.blackboard.set(BATTERY_LEVEL, level)
+        self.blackboard.set(BATTERY_OK, self._ok)
+        self.feedback_message = f"battery {level:.2f} ({'OK' if self._ok else 'LOW'})"
+        return Status.SUCCESS
+
+
+class ScansToBlackboard(_WorldBehaviour):
+    """Whether the laser's scans are healthy (the world's laser works), on the blackboard.
+    Always SUCCESS."""
+
+    def __init__(self, name: str = "Scans to Blackboard") -> None:
+        super().__init__(name)
+        self.blackboard = self.attach_blackboard_client(name)
+        self.blackboard.register_key(LASER_SCANS_OK, access=Access.WRITE)
+
+    def update(self) -> Status:
+        self.blackboard.set(LASER_SCANS_OK, self.world.laser_ok)
+        self.feedback_message = "scans OK" if self.world.laser_ok else "scans all zero"
+        return Status.SUCCESS
