@@ -84,9 +84,10 @@ class ModesToBlackboard(ManagerBehaviour):
 
     def update(self) -> Status:
         """Copy what changed; SUCCESS (there is nothing to wait for)."""
+        manager = self.manager  # NotSetUp when ticked without setup (parts are only known then)
         changed = 0
         for part in self.parts or ():
-            status = part_status(self.manager, part)
+            status = part_status(manager, part)
             if self._written.get(part) != status:
                 self.blackboard.set(part, status)
                 self._written[part] = status

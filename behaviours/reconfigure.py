@@ -45,7 +45,10 @@ class Reconfigure(_RequestBehaviour):
     def update(self) -> Status:
         """SUCCESS (nothing to change, or confirmed), RUNNING, or FAILURE (see the class)."""
         if self.request is not None:
-            return super().update()
+            status = super().update()
+            if status is Status.SUCCESS:  # keep why this mode was chosen visible
+                self.feedback_message = f"{self.decision_text} -> {self.feedback_message}"
+            return status
         decision = self.reasoner.last_decision
         self.feedback_message = self.decision_text
         if decision is None or decision.design is None:

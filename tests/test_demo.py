@@ -1,28 +1,90 @@
-"""The scripted pilot demo tells the whole story and ends as expected."""
+"""The demo runs the pilot mission tree in the simulated world and tells the whole story."""
 
 from __future__ import annotations
+
+import io
+import re
+
+import pytest
+from rich.console import Console
 
 from sm_bt.cli import main
 from sm_bt.demo import Demo, Options
 
 
-def test_demo_story() -> None:
-    lines: list[str] = []
-    assert Demo(Options(laser_failure_at=12.0, battery_low_at=30.0, speed=0, quiet=False), lines.append).run() == 0
-    text = "\n".join(lines)
-    assert "f_performance_mode failed: controller_server: set parameters of mode FAST failed" in text
-    assert "rule degrade_from_normal: laser_resender is unconfigured -> active.f_degraded_mode" in text
-    assert "pilot                active        active(*)     f_degraded_mode" in text
-    assert "pilot ends in active.f_normal_mode; as expected" in text
+def run_demo(**options: object) -> tuple[int, str, Demo]:
+    out = io.StringIO()
+    demo = Demo(Options(speed=0, **options), Console(file=out, width=120, highlight=False))  # type: ignore[arg-type]
+    code = demo.run()
+    return code, out.getvalue(), demo
 
 
-def test_demo_failure_times_are_options(capsys) -> None:  # type: ignore[no-untyped-def]
-    assert main(["demo", "--speed", "0", "--laser-failure-at", "5", "--battery-low-at", "20"]) == 0
+@pytest.mark.parametrize("tree", ["pilot", "metacontrol"])
+def test_demo_tells_the_whole_story(tree: str) -> None:
+    code, text, demo = run_demo(tree=tree)
+    assert code == 0, text
+    # Start-up, then each contingency, in order, with the confirmations.
+    story = [
+        "change_state pilot configure succeeded",
+        "== pilot is now active.f_normal_mode ==",
+        "laser failure: all-zero scans",
+        "restore laser_resender to active.__DEFAULT__ started [recovery]",
+        "gave up restoring laser_resender",
+        "change_mode pilot f_degraded_mode succeeded",
+        "== pilot is now active.f_degraded_mode ==",
+        "laser repaired",
+        "== pilot is now active.f_normal_mode ==",
+        "battery low",
+        "== pilot is now active.f_energy_saving_mode ==",
+        "robot at recharge_station",
+        "recharged: battery 1.00",
+        "== pilot is now active.f_normal_mode ==",
+        "mission SUCCESS",
+        "pilot ends in active.f_normal_mode; as expected",
+    ]
+    position = 0
+    for line in story:
+        found = text.find(line, position)
+        assert found >= 0, f"{line!r} missing after position {position}:\n{text}"
+        position = found + len(line)
+    # The monitor table and the tree are shown at key moments.
+    assert re.search(r"pilot\s+active\s+active\(\*\)\s+f_degraded_mode\s+f_degraded_mode\(\*\)", text)
+    assert "Patrol with contingencies" in text or "Patrol under metacontrol" in text
+    # The mode changes how fast the robot goes: degraded is slower than normal.
+    assert demo.story.waypoints >= 7 and demo.story.recharges == 2
+
+
+def test_degraded_mode_slows_the_robot_down() -> None:
+    _, _, broken = run_demo(laser_failure_at=1.0, laser_repair_at=None, cycles=1)
+    _, _, fine = run_demo(laser_failure_at=None, cycles=1)
+    assert str(broken.manager.actual("pilot")) == "active.f_degraded_mode"
+    # Same mission, but patrolling at 0.1 m/s instead of 0.3 m/s (both recharge at 0.1 m/s).
+    assert broken.clock.now() > fine.clock.now() * 1.3
+
+
+def test_without_laser_repair_the_mission_ends_degraded_as_expected() -> None:
+    code, text, demo = run_demo(laser_failure_at=5.0, laser_repair_at=None, cycles=1)
+    assert code == 0, text
+    assert "pilot ends in active.f_degraded_mode; as expected" in text
+    # Battery low while degraded: recharged in degraded mode (energy saving needs the laser).
+    assert "f_energy_saving_mode" not in text.split("pilot is now active.f_degraded_mode")[1]
+
+
+def test_failure_times_and_speed_are_options(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--speed", "0", "--laser-failure-at", "5", "--laser-repair-at", "20", "--cycles", "1"]) == 0
     out = capsys.readouterr().out
-    assert "[  5.00 s] Laser failure" in out or "[   5.00 s] Laser failure" in out
+    assert re.search(r"\[\s+5\.\d\d s\] laser failure", out)
+    assert re.search(r"\[\s+20\.\d\d s\] laser repaired", out)
 
 
-def test_demo_quiet_prints_only_the_summary(capsys) -> None:  # type: ignore[no-untyped-def]
-    assert main(["demo", "--speed", "0", "--quiet"]) == 0
+def test_quiet_prints_only_the_summary(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--speed", "0", "--quiet", "--cycles", "1"]) == 0
     out = capsys.readouterr().out
-    assert out.lstrip().startswith("Summary") and "Laser failure" not in out
+    assert out.lstrip().startswith("Summary") and "laser failure" not in out
+
+
+@pytest.mark.parametrize("argv", [["--speed", "-1"], ["--cycles", "0"], ["--laser-failure-at", "soon"],
+                                  ["--tree", "nope"]])
+def test_bad_options_are_usage_errors(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", *argv]) == 2
+    assert "Traceback" not in capsys.readouterr().err

@@ -124,3 +124,37 @@ def test_divergence_events_start_and_end() -> None:
     assert any("(grace)" in m for m in messages)
     assert any("(fault)" in m for m in messages)
     assert messages[-1].endswith("back on target active.__DEFAULT__")
+
+
+def test_a_node_that_fails_again_after_each_recovery_runs_out_of_attempts() -> None:
+    # Each recovery succeeds, then the node fails again at once (a broken sensor): the attempts
+    # are counted over the recovery window, so recovery gives up instead of looping for ever.
+    rig = Rig(bundled("pilot"), grace_period=0.5, recovery_attempts=2, recovery_window=60.0)
+    assert rig.finish(rig.manager.change_mode("pilot", "f_normal_mode")).succeeded
+
+    def fail_when_back(event: Event) -> None:
+        if event.kind is EventKind.ACTUAL and event.part == "laser_resender" and event.actual \
+                and event.actual.state is State.ACTIVE and rig.clock.now() > 0.5:
+            rig.clock.call_later(0.1, lambda: laser_failure(rig))
+
+    rig.manager.subscribe(fail_when_back)
+    laser_failure(rig)
+    rig.until(lambda: bool(rig.kinds(EventKind.FAILED)), limit=20.0)
+    recoveries = {e.request.id: e.request for e in rig.kinds(EventKind.REQUEST)
+                  if e.request and e.request.origin is Origin.RECOVERY}
+    assert len(recoveries) == 2 and all(r.succeeded for r in recoveries.values())
+    rig.run(10.0)
+    assert rig.manager.failed() == ["laser_resender"] and rig.state("laser_resender") == "unconfigured"
+
+
+def test_recovery_attempts_come_back_after_the_window() -> None:
+    rig = Rig(bundled("pilot"), grace_period=0.5, recovery_attempts=1, recovery_window=5.0)
+    assert rig.finish(rig.manager.change_mode("pilot", "f_normal_mode")).succeeded
+    for _ in range(3):  # one failure per window: restored every time
+        laser_failure(rig)
+        rig.until(lambda: rig.state("laser_resender") == "unconfigured", limit=2.0)
+        rig.until(lambda: rig.state("laser_resender") == "active.__DEFAULT__", limit=5.0)
+        rig.run(5.0)
+    assert not rig.kinds(EventKind.FAILED)
+    assert len({e.request.id for e in rig.kinds(EventKind.REQUEST)
+                if e.request and e.request.origin is Origin.RECOVERY}) == 3

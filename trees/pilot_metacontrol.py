@@ -78,6 +78,14 @@ class NeedsDecision(py_trees.behaviour.Behaviour):
         return Status.FAILURE
 
 
+def adapt(reasoner: Reasoner, suffix: str = "") -> Behaviour:
+    """When the statuses changed, let the reasoner reconfigure."""
+    return py_trees.composites.Sequence(f"Adapt{suffix}", memory=True, children=[
+        NeedsDecision(f"Statuses changed?{suffix}", reasoner),
+        Reconfigure(f"Reconfigure{suffix}", reasoner),
+    ])
+
+
 def create_root(cycles: int = 2, reasoner: Reasoner | None = None) -> Behaviour:
     """The pilot mission driven by ``reasoner`` (default: the pilot ontology's designs)."""
     reasoner = reasoner or pilot_reasoner()
@@ -88,11 +96,17 @@ def create_root(cycles: int = 2, reasoner: Reasoner | None = None) -> Behaviour:
         ComponentsToReasoner("Components to Reasoner", reasoner),
     ])
     metacontroller = py_trees.composites.Selector("Metacontroller", memory=False, children=[
-        py_trees.composites.Sequence("Adapt", memory=True, children=[
-            NeedsDecision("Statuses changed?", reasoner),
-            Reconfigure("Reconfigure", reasoner),
-        ]),
+        adapt(reasoner),
         py_trees.behaviours.Running("Grounded"),
+    ])
+    # The last action (a recharge) changes statuses the sensors only see at the next tick:
+    # gather once more, then let the reasoner settle the final mode.
+    wrap_up = py_trees.composites.Sequence("Wrap-up", memory=True, children=[
+        py_trees.behaviours.TickCounter("Sense once more", duration=1, completion_status=Status.SUCCESS),
+        py_trees.composites.Selector("Final adaptation", memory=False, children=[
+            adapt(reasoner, " (final)"),
+            py_trees.behaviours.Success("Grounded (final)"),
+        ]),
     ])
     either = py_trees.composites.Selector("Patrol or recharge", memory=False, children=[
         py_trees.composites.Sequence("Recharging", memory=True, children=[
@@ -109,5 +123,6 @@ def create_root(cycles: int = 2, reasoner: Reasoner | None = None) -> Behaviour:
             policy=py_trees.common.ParallelPolicy.SuccessOnSelected([patrol], synchronise=False),
             children=[metacontroller, patrol],
         ),
+        wrap_up,
     ])
     return py_trees.composites.Sequence("Pilot (metacontrol)", memory=False, children=[gather, mission])
