@@ -119,11 +119,16 @@ class Demo:
                 and event.part not in self.model.systems:
             self.say(f"~~ {event.part} left its target: {event.divergence.target} wanted, "
                      f"{event.divergence.actual} reported", "yellow")
-        elif event.kind is EventKind.ACTUAL and event.part == pilot.SYSTEM and event.actual is not None \
-                and event.actual.state is State.ACTIVE and event.actual.mode:
-            if not self.story.modes or self.story.modes[-1][1] != event.actual.mode:
-                self.story.modes.append((event.time, event.actual.mode))
-                self._key_moment = event.actual.mode
+        elif event.kind is EventKind.ACTUAL and event.part == pilot.SYSTEM:
+            self._pilot_changed(event)
+
+    def _pilot_changed(self, event: Event) -> None:
+        actual = event.actual
+        if actual is None or actual.state is not State.ACTIVE or not actual.mode:
+            return
+        if not self.story.modes or self.story.modes[-1][1] != actual.mode:
+            self.story.modes.append((event.time, actual.mode))
+            self._key_moment = actual.mode
 
     def _after_tick(self) -> None:
         """Tell what the tree did: waypoints, recharges, battery, contingencies."""

@@ -63,7 +63,7 @@ def test_degraded_mode_slows_the_robot_down() -> None:
 
 
 def test_without_laser_repair_the_mission_ends_degraded_as_expected() -> None:
-    code, text, demo = run_demo(laser_failure_at=5.0, laser_repair_at=None, cycles=1)
+    code, text, _ = run_demo(laser_failure_at=5.0, laser_repair_at=None, cycles=1)
     assert code == 0, text
     assert "pilot ends in active.f_degraded_mode; as expected" in text
     # Battery low while degraded: recharged in degraded mode (energy saving needs the laser).
