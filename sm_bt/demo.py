@@ -26,6 +26,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.loader import load_model
 from sm_bt.model.states import State
+from sm_bt.model.types import NodePart
 from sm_bt.monitor import Monitor
 from sm_bt.sim import SimBackend
 from sm_bt.sim.world import LaserDevice, World
@@ -115,8 +116,8 @@ class Demo:
         elif event.kind is EventKind.RULE:
             self.say(f"!! {event.message}", "magenta")
         elif event.kind is EventKind.DIVERGENCE and event.divergence is not None \
-                and event.divergence.cause is Cause.FAULT and event.part in self.model.parts \
-                and event.part not in self.model.systems:
+                and event.divergence.cause is Cause.FAULT \
+                and isinstance(self.model.parts.get(event.part), NodePart):
             self.say(f"~~ {event.part} left its target: {event.divergence.target} wanted, "
                      f"{event.divergence.actual} reported", "yellow")
         elif event.kind is EventKind.ACTUAL and event.part == pilot.SYSTEM:
