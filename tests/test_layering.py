@@ -13,11 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def imported_modules(folder: Path) -> set[str]:
     found: set[str] = set()
     for path in folder.rglob("*.py"):
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.Import):
-                found.update(alias.name for alias in node.names)
-            elif isinstance(node, ast.ImportFrom) and node.module:
-                found.add(node.module)
+        found |= imported_modules_of(path)
     return found
 
 
@@ -41,3 +37,26 @@ def test_engine_and_sim_import_without_rclpy_loaded() -> None:
         "assert not any(m == 'rclpy' or m.startswith('rclpy.') for m in sys.modules if sys.modules[m])\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+def test_reasoner_is_usable_without_py_trees() -> None:
+    reasoner = imported_modules_of(ROOT / "sm_bt" / "reasoner.py")
+    assert "sm_bt.model.states" in reasoner
+    assert not {m for m in reasoner if m.split(".")[0] in {"py_trees", "rclpy"}}
+
+
+def test_behaviours_and_trees_sit_above_the_engine() -> None:
+    engine_and_model = imported_modules(ROOT / "sm_bt" / "engine") | imported_modules(ROOT / "sm_bt" / "model")
+    assert not {m for m in engine_and_model if m.startswith(("sm_bt.behaviours", "sm_bt.trees", "sm_bt.sim"))}
+    behaviours = imported_modules(ROOT / "behaviours")
+    assert not {m for m in behaviours if m.startswith(("sm_bt.trees", "sm_bt.demo", "sm_bt.cli"))}
+
+
+def imported_modules_of(path: Path) -> set[str]:
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found.add(node.module)
+    return found
