@@ -98,7 +98,7 @@ class _Wait(_PartCondition):
         if self._check():
             return Status.SUCCESS
         waited = self.manager.clock.now() - self._started
-        if self.timeout is not None and waited >= self.timeout:
+        if self.timeout is not None and waited >= self.timeout - 1e-9:  # clock steps add up inexactly
             self.feedback_message = f"timed out after {self.timeout:g} s: {self.feedback_message}"
             return Status.FAILURE
         self.feedback_message = f"waiting: {self.feedback_message}"

@@ -85,7 +85,9 @@ class HoldMode(ManagerBehaviour):
         if not ours or previous is None or previous == self._held:
             return
         self.restore_request = self.manager.change_to(self.part, previous)
-        self.feedback_message = f"restoring {self.part} to {previous}"
+        restoring = f"restoring {self.part} to {previous}"
+        # On FAILURE (the change failed) keep why in the feedback, as every FAILURE does.
+        self.feedback_message = f"{request.reason}; {restoring}" if new_status is Status.FAILURE else restoring
         self.restore_request.add_done_callback(_report_restore)
 
 

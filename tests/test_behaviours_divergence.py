@@ -1,0 +1,261 @@
+"""OnDivergence and ModesToBlackboard: what the tree learns about parts straying from their targets.
+
+The fault is laser_resender's (the MROS pilot): with the pilot in f_normal_mode the node fails
+by itself (deactivating -> errorprocessing -> unconfigured); recovery is off, so the divergence
+stays until somebody acts."""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Iterator
+
+import py_trees
+import pytest
+from engine_helpers import MODELS, Rig, bundled
+from py_trees.blackboard import Blackboard
+from py_trees.common import Status
+from tree_helpers import build, fresh_blackboard, settle, tick_for, tick_until
+
+from sm_bt.behaviours import ModesToBlackboard, OnDivergence, PartStatus
+from sm_bt.engine.events import Cause, Divergence
+from sm_bt.engine.lifecycle import Outcome, Transition
+from sm_bt.model.loader import load_model
+from sm_bt.model.states import State, StateMode
+
+GRACE = 2.0
+PILOT_PARTS = ("pilot", "amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
+
+
+@pytest.fixture(autouse=True)
+def blackboard() -> Iterator[None]:
+    yield from fresh_blackboard()
+
+
+@pytest.fixture
+def rig() -> Rig:
+    """The pilot in f_normal_mode, recovery off."""
+    rig = Rig(bundled("pilot"), recovery=False, grace_period=GRACE)
+    settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
+    return rig
+
+
+def fail_laser(rig: Rig) -> float:
+    """laser_resender fails by itself; returns when."""
+    rig.backend.trigger("laser_resender", Transition.DEACTIVATE, outcome=Outcome.ERROR)
+    return rig.clock.now()
+
+
+# -- OnDivergence -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("part", "feedback"), [(None, "every part on target"),
+                                                ("laser_resender", "laser_resender on target")])
+def test_on_target_is_failure(rig: Rig, part: str | None, feedback: str) -> None:
+    check = OnDivergence("Diverges?", part)
+    tree = build(check, rig)
+    trace = tick_for(tree, rig, 3.0)
+    assert {t.status for t in trace} == {Status.FAILURE}
+    assert check.feedback_message == feedback
+    assert not Blackboard.exists("/divergence")
+
+
+def test_a_node_failing_by_itself_is_reported_after_the_grace_period(rig: Rig) -> None:
+    check = OnDivergence("Diverges?")
+    tree = build(check, rig)
+    failed_at = fail_laser(rig)
+    trace = tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+
+    during_grace = [t for t in trace if t.time < failed_at + GRACE - 1e-6]
+    assert len(during_grace) == 40
+    assert {t.status for t in during_grace} == {Status.FAILURE}
+    assert trace[-1].time == pytest.approx(failed_at + GRACE, abs=0.051)
+    assert trace[-1].time >= failed_at + GRACE - 1e-6
+
+    divergence = Blackboard.get("/divergence")
+    assert isinstance(divergence, Divergence)
+    assert divergence.part == "laser_resender", "with part=None the node comes first: the likely cause"
+    assert divergence.target == StateMode(State.ACTIVE, "__DEFAULT__")
+    assert divergence.actual.state is State.UNCONFIGURED
+    assert divergence.since == pytest.approx(failed_at)
+    assert divergence.cause is Cause.FAULT
+    assert check.feedback_message == (
+        "laser_resender: target active.__DEFAULT__, actual unconfigured (fault) for 2.0 s (+1 more)")
+
+
+def test_watching_the_system_reports_the_system(rig: Rig) -> None:
+    check = OnDivergence("Pilot diverges?", "pilot")
+    tree = build(check, rig)
+    failed_at = fail_laser(rig)
+    tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+    divergence = Blackboard.get("/divergence")
+    assert divergence.part == "pilot"
+    assert divergence.target == StateMode(State.ACTIVE, "f_normal_mode")
+    assert divergence.since == pytest.approx(failed_at)
+    assert "laser_resender is unconfigured" in divergence.actual.reason
+    assert check.feedback_message.startswith("pilot: target active.f_normal_mode, actual ")
+    assert "(+" not in check.feedback_message
+
+
+def test_watching_another_part_ignores_the_laser(rig: Rig) -> None:
+    check = OnDivergence("Amcl diverges?", "amcl")
+    tree = build(check, rig)
+    fail_laser(rig)
+    trace = tick_for(tree, rig, 5.0)
+    assert {t.status for t in trace} == {Status.FAILURE}
+    assert check.feedback_message == "amcl on target"
+
+
+def test_transient_divergences_only_count_with_errors_only_false(rig: Rig) -> None:
+    strict = OnDivergence("Error?", "laser_resender", variable_name="error")
+    loose = OnDivergence("Any?", "laser_resender", variable_name="any", errors_only=False)
+    tree = build(py_trees.composites.Parallel("Both", policy=py_trees.common.ParallelPolicy.SuccessOnAll(),
+                                              children=[strict, loose]), rig)
+    fail_laser(rig)
+    tree.tick()
+    assert strict.status is Status.FAILURE
+    assert loose.status is Status.SUCCESS
+    assert Blackboard.get("/any").cause is Cause.GRACE
+    assert not Blackboard.exists("/error")
+
+
+def test_no_success_while_a_request_is_in_flight(rig: Rig) -> None:
+    check = OnDivergence("Error?")
+    loose = OnDivergence("Any?", variable_name="any", errors_only=False)
+    tree = build(py_trees.composites.Parallel("Both", policy=py_trees.common.ParallelPolicy.SuccessOnAll(),
+                                              children=[check, loose]), rig)
+    rig.backend.hang_next("pointcloud_to_laser", Transition.ACTIVATE)
+    request = rig.manager.change_mode("pilot", "f_degraded_mode", timeout=3.0)
+
+    trace = tick_for(tree, rig, 2.9, watch=check)
+    assert {t.status for t in trace} == {Status.FAILURE}, "the request explains the divergence"
+    assert loose.status is Status.SUCCESS
+    assert Blackboard.get("/any").cause is Cause.IN_FLIGHT
+
+    # Once the request gave up, the divergence is an error after a new grace period.
+    trace = tick_until(tree, rig, lambda: check.status is Status.SUCCESS, watch=check)
+    assert request.done and request.reason.startswith("timed out after 3 s")
+    assert trace[-1].time == pytest.approx(request.finished + GRACE, abs=0.051)
+
+
+def test_the_variable_is_removed_once_the_divergence_clears(rig: Rig) -> None:
+    check = OnDivergence("Diverges?")
+    tree = build(check, rig)
+    fail_laser(rig)
+    tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+    assert Blackboard.exists("/divergence")
+
+    settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
+    tree.tick()
+    assert check.status is Status.FAILURE
+    assert not Blackboard.exists("/divergence")
+    assert check.feedback_message == "every part on target"
+
+
+def test_a_custom_variable_name(rig: Rig) -> None:
+    check = OnDivergence("Laser lost?", "laser_resender", variable_name="laser/lost")
+    tree = build(check, rig)
+    fail_laser(rig)
+    tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+    assert Blackboard.get("/laser/lost").part == "laser_resender"
+    assert not Blackboard.exists("/divergence")
+
+
+def test_the_blackboard_access_is_on_an_attached_client(rig: Rig) -> None:
+    check = OnDivergence("Diverges?", variable_name="problem")
+    assert check.blackboards == [check.blackboard]
+    assert check.blackboard.write == {"/problem"}
+    tree = build(check, rig)
+    snapshot = py_trees.visitors.SnapshotVisitor()
+    tree.add_visitor(snapshot)
+    tree.tick()
+    assert "/problem" in snapshot.visited_blackboard_keys
+    assert check.blackboard.id() in snapshot.visited_blackboard_client_ids
+
+
+# -- ModesToBlackboard --------------------------------------------------------------------------------
+
+
+def test_every_part_is_written_under_system_modes() -> None:
+    rig = Rig(bundled("pilot"), recovery=False)
+    writer = ModesToBlackboard()
+    tree = build(writer, rig)
+    tree.tick()
+    assert writer.status is Status.SUCCESS
+    assert writer.feedback_message == "5 part(s) changed"
+    for part in PILOT_PARTS:
+        assert Blackboard.get(f"/system_modes/{part}") == PartStatus(part, "unconfigured", None, None, None, None)
+    assert sorted(Blackboard.keys()) == sorted(f"/system_modes/{part}" for part in PILOT_PARTS)
+
+
+def test_the_blackboard_follows_changes(rig: Rig) -> None:
+    writer = ModesToBlackboard()
+    tree = build(writer, rig)
+    tree.tick()
+    pilot = Blackboard.get("/system_modes/pilot")
+    assert pilot == PartStatus("pilot", "active", "f_normal_mode", "active", "f_normal_mode", None)
+    assert pilot.state_mode == str(pilot) == "active.f_normal_mode"
+    assert str(Blackboard.get("/system_modes/pointcloud_to_laser")) == "inactive"
+    tree.tick()
+    assert writer.feedback_message == "0 part(s) changed"
+
+    fail_laser(rig)
+    rig.clock.advance(0.2)
+    tree.tick()
+    laser = Blackboard.get("/system_modes/laser_resender")
+    assert laser == PartStatus("laser_resender", "unconfigured", None, "active", "__DEFAULT__", "grace")
+    assert Blackboard.get("/system_modes/pilot").divergence == "grace"
+    assert writer.feedback_message == "2 part(s) changed"
+
+    rig.clock.advance(GRACE)
+    tree.tick()
+    assert Blackboard.get("/system_modes/laser_resender").divergence == "fault"
+
+    settle(rig, rig.manager.change_mode("pilot", "f_performance_mode"))
+    tree.tick()
+    assert Blackboard.get("/system_modes/pilot") == PartStatus("pilot", "active", "f_performance_mode", "active",
+                                                               "f_performance_mode", None)
+    assert Blackboard.get("/system_modes/controller_server").mode == "FAST"
+    assert Blackboard.get("/system_modes/laser_resender").divergence is None
+
+
+def test_the_keys_are_registered_on_the_attached_client(rig: Rig) -> None:
+    writer = ModesToBlackboard()
+    assert writer.blackboards == [writer.blackboard]
+    tree = build(writer, rig)
+    assert writer.blackboard.write == {f"/system_modes/{part}" for part in PILOT_PARTS}
+    snapshot = py_trees.visitors.SnapshotVisitor()
+    tree.add_visitor(snapshot)
+    tree.tick()
+    assert snapshot.visited_blackboard_keys == {f"/system_modes/{part}" for part in PILOT_PARTS}
+
+
+def test_a_namespace_and_a_subset_of_parts(rig: Rig) -> None:
+    writer = ModesToBlackboard("Modes", namespace="/robot/modes/", parts=["pilot", "amcl"])
+    tree = build(writer, rig)
+    tree.tick()
+    assert writer.blackboard.write == {"/robot/modes/pilot", "/robot/modes/amcl"}
+    assert sorted(Blackboard.keys()) == ["/robot/modes/amcl", "/robot/modes/pilot"]
+    assert str(Blackboard.get("/robot/modes/amcl")) == "active.__DEFAULT__"
+
+
+def test_namespaced_part_names_nest_under_the_namespace() -> None:
+    rig = Rig(load_model(MODELS / "loader_namespaced.yaml"))
+    writer = ModesToBlackboard()
+    build(writer, rig).tick()
+    expected = ["/system_modes/arms", "/system_modes/left/gripper", "/system_modes/right/gripper",
+                "/system_modes/wrist"]
+    assert sorted(writer.blackboard.write) == expected
+    assert sorted(Blackboard.keys()) == expected
+    assert Blackboard.get("/system_modes/left/gripper").part == "left/gripper"
+
+
+def test_other_behaviours_can_read_it(rig: Rig) -> None:
+    check = py_trees.behaviours.CheckBlackboardVariableValue(
+        "Normal?", py_trees.common.ComparisonExpression("/system_modes/pilot.mode", "f_normal_mode", operator.eq))
+    root = py_trees.composites.Sequence("Root", memory=False, children=[ModesToBlackboard(), check])
+    tree = build(root, rig)
+    tree.tick()
+    assert root.status is Status.SUCCESS
+    settle(rig, rig.manager.change_mode("pilot", "f_slow_mode"))
+    tree.tick()
+    assert check.status is Status.FAILURE
