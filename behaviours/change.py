@@ -29,13 +29,13 @@ class _RequestBehaviour(ManagerBehaviour):
         self.timeout = timeout
         self.request: Request | None = None
 
-    def _make_request(self, manager: ModeManager) -> Request:
+    def _make_request(self, manager: ModeManager) -> Request | None:
+        """Ask the manager (it returns at once); ``None`` when there is nothing to ask for."""
         raise NotImplementedError
 
     def initialise(self) -> None:
         """Send the request to the manager (it returns at once)."""
         self.request = self._make_request(self.manager)
-        self.feedback_message = f"requested: {self.request.description}"
 
     def update(self) -> Status:
         """RUNNING while the manager works on the request (feedback: the step in progress),

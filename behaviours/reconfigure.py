@@ -35,12 +35,12 @@ class Reconfigure(_RequestBehaviour):
         except ValueError as error:
             raise ValueError(f"{self.qualified_name}: {error}") from None
 
-    def initialise(self) -> None:
+    def _make_request(self, manager: ModeManager) -> Request | None:
         """Decide, then request the chosen mode if the part is not already targeted at it."""
-        self.request = self.reasoner.reconfigure(self.manager, timeout=self.timeout)
+        request = self.reasoner.reconfigure(manager, timeout=self.timeout)
         decision = self.reasoner.last_decision
         self.decision_text = decision.explanation if decision is not None else ""
-        self.feedback_message = self.decision_text
+        return request
 
     def update(self) -> Status:
         """SUCCESS (nothing to change, or confirmed), RUNNING, or FAILURE (see the class)."""
@@ -54,6 +54,3 @@ class Reconfigure(_RequestBehaviour):
         if decision is None or decision.design is None:
             return Status.FAILURE
         return Status.SUCCESS
-
-    def _make_request(self, manager: ModeManager) -> Request:  # unused: initialise asks the reasoner
-        raise NotImplementedError
