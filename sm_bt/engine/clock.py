@@ -1,16 +1,22 @@
-"""Time for the engine: a clock protocol and a deterministic virtual clock.
+"""Time for the engine: a clock protocol, a deterministic virtual clock and a wall clock.
 
 The manager never sleeps: it asks its clock to call it back later (timeouts, grace periods).
 :class:`VirtualClock` runs those callbacks when the owner advances it, so simulated runs are
-deterministic and can go much faster than wall time.
+deterministic and can go much faster than wall time. :class:`WallClock` runs them in real time
+from a background thread, for real nodes.
 """
 
 from __future__ import annotations
 
 import heapq
 import itertools
+import logging
+import threading
+import time
 from collections.abc import Callable
 from typing import Protocol
+
+log = logging.getLogger("sm_bt.clock")
 
 
 class TimerHandle(Protocol):
@@ -79,3 +85,62 @@ class VirtualClock:
         while self._queue and self._queue[0][2].cancelled:
             heapq.heappop(self._queue)
         return self._queue[0][0] if self._queue else None
+
+
+class WallClock:
+    """Real time (``time.monotonic``) with timers run by one background thread, in due order.
+
+    For backends whose nodes live in real time (ROS 2). Callbacks run in the timer thread; the
+    manager serialises them with everything else through its lock, so a callback may call the
+    manager. A callback that raises is logged and does not stop the thread. ``close()`` stops the
+    thread; timers still pending are dropped.
+    """
+
+    def __init__(self, name: str = "sm_bt-clock") -> None:
+        self._queue: list[tuple[float, int, _VirtualTimer]] = []
+        self._sequence = itertools.count()
+        self._condition = threading.Condition()
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def call_later(self, delay: float, callback: Callable[[], None]) -> _VirtualTimer:
+        timer = _VirtualTimer(self.now() + max(0.0, delay), callback)
+        with self._condition:
+            if self._closed:
+                timer.cancelled = True
+                return timer
+            heapq.heappush(self._queue, (timer.due, next(self._sequence), timer))
+            self._condition.notify()
+        return timer
+
+    def close(self, timeout: float = 2.0) -> None:
+        """Stop the timer thread (waiting up to ``timeout`` for a callback in progress)."""
+        with self._condition:
+            self._closed = True
+            self._queue.clear()
+            self._condition.notify()
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        while True:
+            with self._condition:
+                while not self._closed:
+                    if self._queue and self._queue[0][2].cancelled:
+                        heapq.heappop(self._queue)
+                        continue
+                    wait = self._queue[0][0] - self.now() if self._queue else None
+                    if wait is not None and wait <= 0:
+                        break
+                    self._condition.wait(wait)
+                if self._closed:
+                    return
+                _, _, timer = heapq.heappop(self._queue)
+            try:
+                timer.callback()
+            except Exception:  # one bad callback must not stop every later timer
+                log.exception("timer callback %r failed", timer.callback)

@@ -1,0 +1,85 @@
+"""The wall clock runs timers in real time, in due order, from one background thread."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+
+import pytest
+from engine_helpers import bundled
+
+from sm_bt.engine.clock import WallClock
+from sm_bt.engine.lifecycle import Transition
+from sm_bt.engine.manager import ModeManager
+from sm_bt.sim import SimBackend
+
+
+@pytest.fixture
+def clock() -> Iterator[WallClock]:
+    wall = WallClock()
+    yield wall
+    wall.close()
+
+
+def test_timers_run_in_due_order_not_call_order(clock: WallClock) -> None:
+    ran: list[str] = []
+    done = threading.Event()
+    clock.call_later(0.06, lambda: (ran.append("late"), done.set()))
+    clock.call_later(0.02, lambda: ran.append("early"))
+    clock.call_later(0.0, lambda: ran.append("now"))
+    assert done.wait(2.0)
+    assert ran == ["now", "early", "late"]
+
+
+def test_a_timer_never_runs_before_it_is_due(clock: WallClock) -> None:
+    started = clock.now()
+    fired: list[float] = []
+    done = threading.Event()
+    clock.call_later(0.05, lambda: (fired.append(clock.now()), done.set()))
+    assert done.wait(2.0)
+    assert fired[0] - started >= 0.05
+
+
+def test_cancelled_timers_do_not_run(clock: WallClock) -> None:
+    ran: list[str] = []
+    done = threading.Event()
+    clock.call_later(0.02, lambda: ran.append("cancelled")).cancel()
+    clock.call_later(0.04, done.set)
+    assert done.wait(2.0)
+    assert ran == []
+
+
+def test_a_failing_callback_does_not_stop_later_timers(clock: WallClock) -> None:
+    done = threading.Event()
+
+    def broken() -> None:
+        raise RuntimeError("observer bug")
+
+    clock.call_later(0.0, broken)
+    clock.call_later(0.01, done.set)
+    assert done.wait(2.0)
+
+
+def test_close_stops_the_thread_and_drops_pending_timers() -> None:
+    clock = WallClock()
+    ran: list[str] = []
+    clock.call_later(0.05, lambda: ran.append("pending"))
+    clock.close()
+    assert not clock._thread.is_alive()
+    handle = clock.call_later(0.0, lambda: ran.append("after close"))
+    handle.cancel()
+    assert ran == []
+
+
+def test_a_request_times_out_on_the_wall_clock(clock: WallClock) -> None:
+    # The manager's timeout timer fires from the clock's thread and fails the request there.
+    model = bundled("pilot")
+    backend = SimBackend(model)
+    backend.hang_next("amcl", Transition.CONFIGURE)
+    manager = ModeManager(model, backend)
+    manager.clock = clock  # the backend's virtual clock drives the nodes; only the timeout is real
+    done = threading.Event()
+    request = manager.change_state("pilot", "configure", timeout=0.05)
+    request.add_done_callback(lambda _: done.set())
+    assert done.wait(2.0)
+    assert not request.succeeded and "timed out after 0.05 s" in request.reason
