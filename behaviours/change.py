@@ -10,12 +10,12 @@ from __future__ import annotations
 from py_trees.common import Status
 
 from sm_bt.behaviours.manager_access import ManagerBehaviour
-from sm_bt.engine.lifecycle import Transition
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 
 #: The lifecycle transitions a tree may ask for, by label.
-TRANSITIONS = ("configure", "activate", "deactivate", "cleanup", "shutdown")
+TRANSITIONS = REQUESTABLE_LABELS
 
 
 class _RequestBehaviour(ManagerBehaviour):

@@ -21,13 +21,14 @@ from rich.console import Console
 
 from sm_bt import bundled
 from sm_bt.engine.clock import VirtualClock
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.monitor import Monitor
 from sm_bt.sim import SimBackend
 
 #: Lifecycle transitions ``--change PART=LABEL`` requests with ``change_state``; anything else is a mode.
-TRANSITIONS = ("configure", "activate", "deactivate", "cleanup", "shutdown")
+TRANSITIONS = REQUESTABLE_LABELS
 STEP = 0.1  # virtual seconds per clock advance: appended output changes at most this often
 LIVE_STEP = 0.02  # finer in place, where intermediate states (configuring, ...) cost no lines
 SETTLE = 1.0  # virtual seconds watched after the last request, without --duration

@@ -4,6 +4,8 @@ import pytest
 
 from sm_bt.engine.lifecycle import (
     OUTCOMES,
+    REQUESTABLE,
+    REQUESTABLE_LABELS,
     Outcome,
     PlanError,
     Transition,
@@ -82,3 +84,7 @@ def test_label_resolution_depends_on_start_state() -> None:
     assert transition_by_label("configure", A) is Transition.CONFIGURE
     with pytest.raises(PlanError, match="not a lifecycle transition label"):
         transition_by_label("reboot", A)
+
+
+def test_requestable_labels_are_the_requestable_transitions() -> None:
+    assert set(REQUESTABLE_LABELS) == {step.transition.label for step in REQUESTABLE}

@@ -99,6 +99,9 @@ REQUESTABLE: tuple[Step, ...] = (
     Step(Transition.ACTIVE_SHUTDOWN, State.ACTIVE, State.SHUTTINGDOWN, State.FINALIZED),
 )
 
+#: The requestable transitions by label, in lifecycle order (``shutdown`` resolves by start state).
+REQUESTABLE_LABELS: tuple[str, ...] = ("configure", "activate", "deactivate", "cleanup", "shutdown")
+
 #: Where a transition state goes for each callback outcome, with the transition id reported.
 OUTCOMES: dict[State, dict[Outcome, tuple[Transition, State]]] = {
     State.CONFIGURING: {
