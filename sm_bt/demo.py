@@ -17,9 +17,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import py_trees
+from py_trees.blackboard import Blackboard
 from py_trees.common import Status
 from rich.console import Console
 
+from sm_bt.arguments import non_negative, positive_int
 from sm_bt.bundled import path as bundled_model
 from sm_bt.engine.events import Cause, Event, EventKind
 from sm_bt.engine.manager import ModeManager
@@ -27,11 +29,11 @@ from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.loader import load_model
 from sm_bt.model.states import State
 from sm_bt.model.types import NodePart
-from sm_bt.monitor import Monitor
+from sm_bt.monitor import Monitor, terminal_console
 from sm_bt.sim import SimBackend
 from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
-from sm_bt.trees.pilot_actions import NavigateTo, Recharge
+from sm_bt.trees.pilot_actions import BATTERY_OK, NavigateTo, Recharge
 
 #: What Nav2's parameter files give the nodes before any mode is applied (the pilot's TB3 set-up).
 NAV2_PARAMETERS = {
@@ -72,8 +74,7 @@ class Demo:
         if options.tree not in TREES:
             raise ValueError(f"unknown tree {options.tree!r} (trees: {', '.join(TREES)})")
         self.options = options
-        # Not a terminal (a pipe, CI logs): wide enough for the monitor's table anyway.
-        self.console = console or Console(highlight=False, width=None if _terminal() else 120)
+        self.console = console or terminal_console()
         self.model = load_model(bundled_model("pilot"))
         self.backend = SimBackend(self.model, transition_delay=0.2, parameter_delay=0.05,
                                   initial_parameters=NAV2_PARAMETERS)
@@ -146,7 +147,8 @@ class Demo:
             elif isinstance(behaviour, Recharge):
                 self.story.recharges += 1
                 self.say("recharged: battery 1.00")
-        battery_ok = self.world.battery >= 0.5 if self._battery_ok else self.world.battery > 0.8
+        # The tree's battery monitor decides when the battery is low or recovered.
+        battery_ok = Blackboard.get(BATTERY_OK) if Blackboard.exists(BATTERY_OK) else True
         if battery_ok != self._battery_ok:
             self._battery_ok = battery_ok
             self.say("battery recovered" if battery_ok else f"battery low ({self.world.battery:.2f}): "
@@ -235,10 +237,6 @@ class Demo:
         return 0 if good else 1
 
 
-def _terminal() -> bool:
-    return Console().is_terminal
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tree", choices=sorted(TREES), default="pilot",
                         help="contingencies in the tree (pilot, default) or chosen by a metacontroller")
@@ -246,8 +244,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="virtual time the laser breaks; 'never' for no failure (default 15)")
     parser.add_argument("--laser-repair-at", type=_time, default=40.0, metavar="SECONDS",
                         help="virtual time the laser is repaired; 'never' to leave it broken (default 40)")
-    parser.add_argument("--cycles", type=_positive_int, default=2, help="patrol cycles (default 2)")
-    parser.add_argument("--speed", type=_non_negative, default=25.0,
+    parser.add_argument("--cycles", type=positive_int, default=2, help="patrol cycles (default 2)")
+    parser.add_argument("--speed", type=non_negative, default=25.0,
                         help="virtual seconds per wall second; 0 runs as fast as possible (default 25)")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
 
@@ -255,27 +253,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _time(text: str) -> float | None:
     if text == "never":
         return None
-    return _non_negative(text)
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not value >= 0:
-        raise argparse.ArgumentTypeError(f"{text} must be 0 or more")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text} must be 1 or more")
-    return value
+    return non_negative(text)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -10,6 +10,7 @@ and :class:`Monitor` keeps either up to date from the manager's events.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -39,26 +40,35 @@ JsonSnapshot = dict[str, Any]
 class Row:
     """One part as the monitor shows it.
 
-    ``actual_state``/``actual_mode`` carry the ``(*)`` marker for display; ``raw_state``/``raw_mode``
-    are the same values without it, with ``state_inferred``/``mode_inferred`` separate, for
-    programs. ``cause`` and ``since`` describe the divergence (``None`` when on target), ``error``
+    ``raw_state``/``raw_mode`` are the actual values, ``state_inferred``/``mode_inferred`` say
+    whether they were inferred; ``actual_state``/``actual_mode`` add the ``(*)`` marker for
+    display. ``cause`` and ``since`` describe the divergence (``None`` when on target), ``error``
     is true when it is beyond the grace period and unexplained (fault or override).
     """
 
     part: str
     kind: str
     target_state: str
-    actual_state: str
     target_mode: str
-    actual_mode: str
-    diverges: bool
-    raw_state: str = ""
-    raw_mode: str = ""
-    state_inferred: bool = False
-    mode_inferred: bool = False
+    raw_state: str
+    raw_mode: str
+    state_inferred: bool
+    mode_inferred: bool
     cause: Cause | None = None
     since: float | None = None
     error: bool = False
+
+    @property
+    def actual_state(self) -> str:
+        return self.raw_state + (INFERRED if self.state_inferred else "")
+
+    @property
+    def actual_mode(self) -> str:
+        return self.raw_mode + (INFERRED if self.raw_mode and self.mode_inferred else "")
+
+    @property
+    def diverges(self) -> bool:
+        return self.cause is not None
 
 
 def snapshot(manager: ModeManager) -> list[Row]:
@@ -70,16 +80,11 @@ def snapshot(manager: ModeManager) -> list[Row]:
         actual = manager.actual(part.name)
         target = manager.target(part.name)
         divergence = manager.divergence(part.name)
-        state = actual.state.label + (INFERRED if actual.state_inferred else "")
-        mode = (actual.mode + (INFERRED if actual.mode_inferred else "")) if actual.mode else ""
         rows.append(Row(
             part=part.name,
             kind=part.kind.value,
             target_state=target.state.label if target else "",
-            actual_state=state,
             target_mode=(target.mode or "") if target else "",
-            actual_mode=mode,
-            diverges=divergence is not None,
             raw_state=actual.state.label,
             raw_mode=actual.mode or "",
             state_inferred=actual.state_inferred,
@@ -106,6 +111,15 @@ def render_text(rows: list[Row]) -> str:
         lines.append(mark + "  ".join(t.ljust(widths[i]) for i, t in enumerate(text)).rstrip())
     lines.append(" (*) = inferred    ! = diverges from target")
     return "\n".join(lines)
+
+
+def terminal_console(width_when_piped: int = 120) -> Console:
+    """A console for the terminal; for pipes and files (where rich assumes 80 columns) one wide
+    enough for the table, unless ``COLUMNS`` says otherwise."""
+    console = Console(highlight=False)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console = Console(highlight=False, width=width_when_piped)
+    return console
 
 
 def row_style(row: Row) -> str | None:

@@ -9,26 +9,22 @@ virtual step: in place on a terminal, appended otherwise.
 from __future__ import annotations
 
 import argparse
-import logging
-import os
 import sys
 import time
-from collections.abc import Iterator
-from contextlib import AbstractContextManager, contextmanager, nullcontext
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 
 from rich.console import Console
 
 from sm_bt import bundled
+from sm_bt.arguments import non_negative
 from sm_bt.engine.clock import VirtualClock
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
-from sm_bt.monitor import Monitor
+from sm_bt.monitor import Monitor, terminal_console
 from sm_bt.sim import SimBackend
 
-#: Lifecycle transitions ``--change PART=LABEL`` requests with ``change_state``; anything else is a mode.
-TRANSITIONS = REQUESTABLE_LABELS
 STEP = 0.1  # virtual seconds per clock advance: appended output changes at most this often
 LIVE_STEP = 0.02  # finer in place, where intermediate states (configuring, ...) cost no lines
 SETTLE = 1.0  # virtual seconds watched after the last request, without --duration
@@ -44,7 +40,7 @@ class Change:
 
     @property
     def is_transition(self) -> bool:
-        return self.value in TRANSITIONS
+        return self.value in REQUESTABLE_LABELS
 
     def start(self, manager: ModeManager) -> Request:
         if self.is_transition:
@@ -60,25 +56,15 @@ def parse_change(text: str) -> Change:
     return Change(part.strip(), value.strip())
 
 
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not value >= 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number >= 0")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="MODEL",
                         help="model file, or the name of a bundled model (" + ", ".join(bundled.names()) + ")")
     parser.add_argument("--change", action="append", type=parse_change, default=[], metavar="PART=MODE",
                         help="request a change, then wait for it (repeatable, in order): a mode name, or one "
-                             f"of the lifecycle transitions {', '.join(TRANSITIONS)}")
-    parser.add_argument("--duration", type=_seconds, metavar="SECONDS",
+                             f"of the lifecycle transitions {', '.join(REQUESTABLE_LABELS)}")
+    parser.add_argument("--duration", type=non_negative, metavar="SECONDS",
                         help="virtual seconds to watch in all (default: until the requests are done, plus 1)")
-    parser.add_argument("--speed", type=_seconds, default=10.0,
+    parser.add_argument("--speed", type=non_negative, default=10.0,
                         help="virtual seconds per wall second; 0 runs as fast as possible (default 10)")
     parser.add_argument("--json", action="store_true",
                         help="print JSON Lines snapshots on stdout instead of the table (one per change)")
@@ -99,11 +85,11 @@ def run(args: argparse.Namespace) -> int:
         print(warning, file=sys.stderr)
     backend = SimBackend(model)
     manager = ModeManager(model, backend)
-    monitor = Monitor(manager, sys.stdout if args.json else _console(), title=args.model)
+    monitor = Monitor(manager, sys.stdout if args.json else terminal_console(), title=args.model)
     watch = _Watch(manager, backend.clock, monitor, speed=args.speed, show=not args.once)
     failed = 0
     try:
-        with _quiet_engine_logs(), watch.view():
+        with watch.view():
             watch.show()
             deadline = None if args.duration is None else manager.clock.now() + args.duration
             for change in args.change:
@@ -169,27 +155,3 @@ class _Watch:
         if not request.succeeded:
             return f"{label} failed: {request.reason}"
         return ""
-
-
-def _console() -> Console:
-    """The terminal's console; a wide one for pipes and files, where rich would assume 80 columns."""
-    console = Console()
-    if not console.is_terminal and "COLUMNS" not in os.environ:
-        console = Console(width=160)
-    return console
-
-
-@contextmanager
-def _quiet_engine_logs() -> Iterator[None]:
-    """Keep the engine's warnings (logging's last-resort stderr output) out of the table: the
-    monitor shows divergences itself and reports failed requests. Configured logging is left alone."""
-    logger = logging.getLogger("sm_bt")
-    if logger.hasHandlers():
-        yield
-        return
-    handler = logging.NullHandler()
-    logger.addHandler(handler)
-    try:
-        yield
-    finally:
-        logger.removeHandler(handler)

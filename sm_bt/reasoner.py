@@ -23,10 +23,11 @@ import threading
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Protocol
 
+from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
+from sm_bt.model.types import Model
 
 __all__ = [
     "PILOT_DESIGNS",
@@ -148,25 +149,6 @@ class Decision:
 
     def __str__(self) -> str:
         return self.explanation
-
-
-class ModeManagerLike(Protocol):
-    """What :meth:`Reasoner.reconfigure` needs of a manager (:class:`ModeManager` fits)."""
-
-    def target(self, part: str) -> StateMode | None: ...
-
-    def change_mode(self, part: str, mode: str, *, timeout: float | None = None) -> Request: ...
-
-
-class _PartLike(Protocol):
-    @property
-    def modes(self) -> Mapping[str, object]: ...
-
-
-class ModelLike(Protocol):
-    """What :meth:`Reasoner.check` needs of a model (:class:`~sm_bt.model.types.Model` fits)."""
-
-    def part(self, name: str) -> _PartLike: ...
 
 
 class Reasoner:
@@ -303,7 +285,7 @@ class Reasoner:
                    f"which violates {', '.join(self.objective.violations(chosen))}")
         return Decision(chosen, names, meeting_names, f"{prefix}: {why}", failed)
 
-    def reconfigure(self, manager: ModeManagerLike, *, timeout: float | None = None) -> Request | None:
+    def reconfigure(self, manager: ModeManager, *, timeout: float | None = None) -> Request | None:
         """Decide, and ask ``manager`` for the chosen mode of the part unless its target already
         is that mode (active). ``None`` when there is nothing to do or nothing realisable
         (``last_decision`` says which). ``timeout`` bounds the change (``None``: the manager's)."""
@@ -314,7 +296,7 @@ class Reasoner:
             return None
         return manager.change_mode(self.part, decision.design.mode, timeout=timeout)
 
-    def check(self, model: ModelLike) -> None:
+    def check(self, model: Model) -> None:
         """Raise ``ValueError`` unless ``model`` has the part and every design's mode is a mode
         of it: a typo would otherwise only show when the reasoner first picks that design."""
         try:

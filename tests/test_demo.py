@@ -50,7 +50,7 @@ def test_demo_tells_the_whole_story(tree: str) -> None:
     # The monitor table and the tree are shown at key moments.
     assert re.search(r"pilot\s+active\s+active\(\*\)\s+f_degraded_mode\s+f_degraded_mode\(\*\)", text)
     assert "Patrol with contingencies" in text or "Patrol under metacontrol" in text
-    # The mode changes how fast the robot goes: degraded is slower than normal.
+    # A whole patrol and both recharges happened.
     assert demo.story.waypoints >= 7 and demo.story.recharges == 2
 
 

@@ -50,7 +50,7 @@ def is_true(name: str, key: str, value: bool) -> Behaviour:
         name, check=ComparisonExpression(key, value, operator.eq))
 
 
-def gather() -> Behaviour:
+def gather() -> py_trees.composites.Sequence:
     """Data gathering, every tick: part states and modes, battery, laser scans."""
     return py_trees.composites.Sequence("Gather", memory=False, children=[
         ModesToBlackboard(),

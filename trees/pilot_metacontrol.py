@@ -14,16 +14,12 @@ import py_trees
 from py_trees.behaviour import Behaviour
 from py_trees.common import Access, Status
 
-from sm_bt.behaviours import ChangeState, ManagerBehaviour, ModesToBlackboard, Reconfigure
+from sm_bt.behaviours import ChangeState, ManagerBehaviour, Reconfigure
 from sm_bt.engine.manager import ModeManager
 from sm_bt.reasoner import Reasoner, pilot_reasoner
+from sm_bt.trees import pilot
 from sm_bt.trees.pilot import SYSTEM, go_and_recharge, is_true, patrolling
-from sm_bt.trees.pilot_actions import (
-    BATTERY_OK,
-    LASER_SCANS_OK,
-    BatteryToBlackboard,
-    ScansToBlackboard,
-)
+from sm_bt.trees.pilot_actions import BATTERY_OK, LASER_SCANS_OK
 
 
 class ComponentsToReasoner(ManagerBehaviour):
@@ -89,12 +85,7 @@ def adapt(reasoner: Reasoner, suffix: str = "") -> Behaviour:
 def create_root(cycles: int = 2, reasoner: Reasoner | None = None) -> Behaviour:
     """The pilot mission driven by ``reasoner`` (default: the pilot ontology's designs)."""
     reasoner = reasoner or pilot_reasoner()
-    gather = py_trees.composites.Sequence("Gather", memory=False, children=[
-        ModesToBlackboard(),
-        BatteryToBlackboard(),
-        ScansToBlackboard(),
-        ComponentsToReasoner("Components to Reasoner", reasoner),
-    ])
+    gather = pilot.gather().add_children([ComponentsToReasoner("Components to Reasoner", reasoner)])
     metacontroller = py_trees.composites.Selector("Metacontroller", memory=False, children=[
         adapt(reasoner),
         py_trees.behaviours.Running("Grounded"),

@@ -32,7 +32,7 @@ class Clock(Protocol):
         """Run ``callback`` once, ``delay`` seconds from now (never synchronously inside this call)."""
 
 
-class _VirtualTimer:
+class _Timer:
     __slots__ = ("callback", "cancelled", "due")
 
     def __init__(self, due: float, callback: Callable[[], None]) -> None:
@@ -49,14 +49,14 @@ class VirtualClock:
 
     def __init__(self, start: float = 0.0) -> None:
         self._now = start
-        self._queue: list[tuple[float, int, _VirtualTimer]] = []
+        self._queue: list[tuple[float, int, _Timer]] = []
         self._sequence = itertools.count()
 
     def now(self) -> float:
         return self._now
 
-    def call_later(self, delay: float, callback: Callable[[], None]) -> _VirtualTimer:
-        timer = _VirtualTimer(self._now + max(0.0, delay), callback)
+    def call_later(self, delay: float, callback: Callable[[], None]) -> _Timer:
+        timer = _Timer(self._now + max(0.0, delay), callback)
         heapq.heappush(self._queue, (timer.due, next(self._sequence), timer))
         return timer
 
@@ -97,7 +97,7 @@ class WallClock:
     """
 
     def __init__(self, name: str = "sm_bt-clock") -> None:
-        self._queue: list[tuple[float, int, _VirtualTimer]] = []
+        self._queue: list[tuple[float, int, _Timer]] = []
         self._sequence = itertools.count()
         self._condition = threading.Condition()
         self._closed = False
@@ -107,8 +107,8 @@ class WallClock:
     def now(self) -> float:
         return time.monotonic()
 
-    def call_later(self, delay: float, callback: Callable[[], None]) -> _VirtualTimer:
-        timer = _VirtualTimer(self.now() + max(0.0, delay), callback)
+    def call_later(self, delay: float, callback: Callable[[], None]) -> _Timer:
+        timer = _Timer(self.now() + max(0.0, delay), callback)
         with self._condition:
             if self._closed:
                 timer.cancelled = True

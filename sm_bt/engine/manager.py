@@ -132,14 +132,7 @@ class ModeManager:
     def change_mode(self, part: str, mode: str, *, timeout: float | None = None) -> Request:
         """Ask for ``part`` (system or node) to be active in ``mode``. Returns at once."""
         with self._entry():
-            description = f"change_mode {part} {mode}"
-            if part not in self.model.parts:
-                return self._refuse(part, description, self._unknown_part(part))
-            resolved = self._resolve_mode(part, mode)
-            if resolved is None:
-                modes = ", ".join(self.available_modes(part))
-                return self._refuse(part, description, f"unknown mode {mode!r} of {part} (modes: {modes})")
-            return self._start(part, StateMode(State.ACTIVE, resolved), description, Origin.USER, timeout)
+            return self._request(part, StateMode(State.ACTIVE, mode or None), f"change_mode {part} {mode}", timeout)
 
     def change_state(self, part: str, transition: Transition | str | int, *,
                      timeout: float | None = None) -> Request:
@@ -174,18 +167,23 @@ class ModeManager:
             except ValueError as error:
                 return self._refuse(part, f"change_to {part} {target}", str(error))
             description = f"change_to {part} {wanted}"
-            if part not in self.model.parts:
-                return self._refuse(part, description, self._unknown_part(part))
             if wanted.state not in (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE):
                 return self._refuse(part, description, f"{wanted.state.label} is not a state to ask for "
                                     "(unconfigured, inactive or active)")
-            if wanted.state is State.ACTIVE:
-                resolved = self._resolve_mode(part, wanted.mode or "")
-                if resolved is None:
-                    modes = ", ".join(self.available_modes(part))
-                    return self._refuse(part, description, f"unknown mode {wanted.mode!r} of {part} (modes: {modes})")
-                wanted = StateMode(State.ACTIVE, resolved)
-            return self._start(part, wanted, description, Origin.USER, timeout)
+            return self._request(part, wanted, description, timeout)
+
+    def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None) -> Request:
+        """Start a user request for ``wanted`` (an active mode resolved: ``None``/``__DEFAULT__``
+        is the default mode), or refuse it with the part's real names."""
+        if part not in self.model.parts:
+            return self._refuse(part, description, self._unknown_part(part))
+        if wanted.state is State.ACTIVE:
+            resolved = self._resolve_mode(part, wanted.mode or "")
+            if resolved is None:
+                modes = ", ".join(self.available_modes(part))
+                return self._refuse(part, description, f"unknown mode {wanted.mode!r} of {part} (modes: {modes})")
+            wanted = StateMode(State.ACTIVE, resolved)
+        return self._start(part, wanted, description, Origin.USER, timeout)
 
     def subscribe(self, callback: Observer, part: str | Iterable[str] | None = None,
                   kinds: Iterable[EventKind] | None = None) -> Subscription:

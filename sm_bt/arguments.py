@@ -1,0 +1,28 @@
+"""Argument types shared by the CLI's subcommands: a bad value is a usage error (exit 2) with a
+message that says what is expected, never a traceback."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+
+def non_negative(text: str) -> float:
+    """A finite number of seconds (or a speed), 0 or more."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number, 0 or more")
+    return value
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text} must be 1 or more")
+    return value
