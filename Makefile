@@ -3,18 +3,36 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# The system_modes_msgs interface package: built (once per source hash, cached under build/wheels/)
+# and installed into the venv by tools/ensure_system_modes_msgs.sh.
+ROS_IFACE_SRCS := $(wildcard interfaces/system_modes_msgs/*.txt interfaces/system_modes_msgs/*.toml \
+	interfaces/system_modes_msgs/*.xml interfaces/system_modes_msgs/msg/* interfaces/system_modes_msgs/srv/*)
+
+# ROS 2 (rclpy) environment for every recipe: discovery on this host only, logs under build/.
+# ROS_DOMAIN_ID is chosen per run by the Python code.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export ROS_LOG_DIR := $(CURDIR)/build/ros_log
 
 .PHONY: demo test lint clean
 
-$(STAMP): pyproject.toml constraints.txt
+$(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_system_modes_msgs.sh
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,ros]'
+	bash tools/ensure_system_modes_msgs.sh $(VENV)
 	touch $@
 
 demo: $(STAMP)
+	@mkdir -p $(ROS_LOG_DIR)
 	$(BIN)/sm-bt demo
 
+# The same demo on real ROS 2 lifecycle nodes (a child process) with the manager on ROS 2.
+.PHONY: demo-ros
+demo-ros: $(STAMP)
+	@mkdir -p $(ROS_LOG_DIR)
+	$(BIN)/sm-bt demo --ros
+
 test: $(STAMP)
+	@mkdir -p $(ROS_LOG_DIR)
 	$(BIN)/python -m pytest -q
 	$(MAKE) --no-print-directory lint
 

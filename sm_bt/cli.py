@@ -14,12 +14,13 @@ import argparse
 import math
 import os
 import sys
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from sm_bt import bundled, demo, monitor_cli
+from sm_bt import bundled, demo, manager_cli, monitor_cli
 from sm_bt.model.errors import ModelError
 from sm_bt.model.loader import load_model
 from sm_bt.model.types import (
@@ -261,6 +262,22 @@ def format_value(value: ParamValue) -> str:
     return repr(value)
 
 
+# -- manager ---------------------------------------------------------------------------------
+
+
+def run_manager(args: argparse.Namespace) -> int:
+    model = _load_or_report(args.model, strict=not args.lenient)
+    if model is None:
+        return 1
+    stop = threading.Event()
+    manager_cli.install_stop_handlers(stop)
+    try:
+        manager_cli.serve(model, args, stop)
+    except manager_cli.RosMissing as error:
+        raise CliError(str(error)) from None
+    return 0
+
+
 # -- the table and main ------------------------------------------------------------------------
 
 #: Every subcommand, in the order ``--help`` lists them. Add new ones here.
@@ -280,6 +297,12 @@ COMMANDS: list[Command] = [
                         "then nodes, (*) on inferred values, divergences highlighted. The model's nodes run on "
                         "the embedded simulated backend; --change requests are made in turn. Watching live "
                         "ROS nodes (--ros) comes with the ROS backend."),
+    Command("manager", "run the mode manager as a ROS 2 node (drop-in for system_modes' mode_manager)",
+            manager_cli.add_arguments, run_manager,
+            description="Serve /{system}/change_state, get_state, get_available_states and /{part}/change_mode, "
+                        "get_mode, get_available_modes for every part of MODEL, publish mode_event, "
+                        "transition_event and the request topics (latched, as soon as inference changes), and "
+                        "manage the nodes through their lifecycle and parameter services. Needs the ros extra."),
 ]
 
 

@@ -6,7 +6,16 @@ from pathlib import Path
 
 import pytest
 
+import sm_bt.ros.environment
+
+# Before any test starts rclpy or a ROS process (they inherit it): local discovery, this run's domain.
+# prepare() itself needs no rclpy, so this is harmless where ROS 2 is not installed.
+sm_bt.ros.environment.prepare(own_domain=True)
+
 MODELS = Path(__file__).parent / "models"
+
+# The ROS test fixtures (node_processes, ros_context); the module imports rclpy only when used.
+pytest_plugins = ("ros_processes",)
 
 
 @pytest.fixture

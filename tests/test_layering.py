@@ -60,3 +60,40 @@ def imported_modules_of(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom) and node.module:
             found.add(node.module)
     return found
+
+
+def test_only_the_ros_adapters_import_rclpy() -> None:
+    ros_names = {"rclpy", "lifecycle_msgs", "rcl_interfaces", "system_modes_msgs", "std_msgs", "builtin_interfaces"}
+    outside = set()
+    for folder in (ROOT / "sm_bt", ROOT / "behaviours", ROOT / "trees"):
+        for path in folder.rglob("*.py"):
+            if (ROOT / "sm_bt" / "ros") in path.parents:
+                continue
+            outside |= {m for m in imported_modules_of(path) if m.split(".")[0] in ros_names}
+    assert not outside, "rclpy and ROS messages belong in sm_bt.ros"
+    # The simulated side never reaches up into the ROS adapters.
+    below = imported_modules(ROOT / "sm_bt" / "engine") | imported_modules(ROOT / "sm_bt" / "sim") | \
+        imported_modules(ROOT / "behaviours") | imported_modules(ROOT / "trees")
+    assert not {m for m in below if m.startswith("sm_bt.ros")}
+
+
+def test_the_cli_starts_without_rclpy() -> None:
+    # `sm-bt check/modes/demo` must work where the ros extra is missing: ROS is imported lazily.
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "from sm_bt import cli\n"
+        "assert cli.main(['modes', 'pilot']) == 0\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True)
+
+
+def test_the_manager_command_without_rclpy_says_how_to_install_it() -> None:
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "from sm_bt import cli\n"
+        "sys.exit(cli.main(['manager', 'pilot']))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    assert result.returncode == 1
+    assert "ROS 2 is not available here" in result.stderr and "[ros]" in result.stderr
+    assert "Traceback" not in result.stderr

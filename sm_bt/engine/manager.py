@@ -78,6 +78,12 @@ class ModeManager:
 
     # -- queries -------------------------------------------------------------------------------
 
+    @property
+    def lock(self) -> threading.RLock:
+        """The lock serialising the manager. Hold it to read several values consistently, or to
+        subscribe and read the current values with no event slipping in between."""
+        return self._lock
+
     def actual(self, part: str) -> Actual:
         """The inferred actual state and mode of ``part`` (see :class:`Actual` for the flags)."""
         with self._lock:

@@ -1,0 +1,81 @@
+"""``sm-bt manager MODEL``: the mode manager as a ROS 2 node (a drop-in for the reference's).
+
+Serves the reference's services and topics for every part of the model (see
+:mod:`sm_bt.ros.manager_node`) and manages the nodes through the ROS 2 backend, until SIGINT or
+SIGTERM. Needs the ``ros`` extra; without it, says how to install it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from types import FrameType
+
+from sm_bt.arguments import non_negative, positive_int
+from sm_bt.model.types import Model, SystemPart
+
+
+class RosMissing(Exception):
+    """The ROS 2 extra is not installed (the message says how to install it)."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("model", metavar="MODEL", help="model file, or the name of a bundled model")
+    parser.add_argument("--node-name", default="__mode_manager",
+                        help="name of the manager's ROS node (default __mode_manager, as the reference)")
+    parser.add_argument("--grace-period", type=non_negative, default=2.0, metavar="SECONDS",
+                        help="how long a divergence lasts before rules and recovery act (default 2)")
+    parser.add_argument("--request-timeout", type=non_negative, default=30.0, metavar="SECONDS",
+                        help="give up on a request after this long (default 30)")
+    parser.add_argument("--recovery-attempts", type=positive_int, default=3,
+                        help="restore attempts per node within a minute before giving up (default 3)")
+    parser.add_argument("--no-rules", action="store_true", help="do not apply the model's rules")
+    parser.add_argument("--no-recovery", action="store_true", help="do not restore nodes that left their target")
+    parser.add_argument("--lenient", action="store_true",
+                        help="accept what the reference accepts where sm_bt is stricter")
+
+
+def startup_lines(model: Model) -> list[str]:
+    """What the manager serves, in the reference's start-up log format."""
+    lines: list[str] = []
+    for part in model.systems:
+        lines.append(f"- system '{part.name}'")
+        lines.extend(f"  - /{part.name}/{name}" for name in ("change_state", "get_state", "get_available_states",
+                                                             "change_mode", "get_mode", "get_available_modes"))
+    for node in model.nodes:
+        lines.append(f"- node '{node.name}'")
+        lines.extend(f"  - /{node.name}/{name}" for name in ("change_mode", "get_mode", "get_available_modes"))
+    return lines
+
+
+def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None:
+    """Run the manager node until ``stop`` is set."""
+    from sm_bt.ros.environment import RosUnavailable
+
+    try:
+        from sm_bt.ros.runtime import RosRuntime
+
+        runtime = RosRuntime(model, node_name=args.node_name, manager_options={
+            "grace_period": args.grace_period, "request_timeout": args.request_timeout,
+            "recovery_attempts": args.recovery_attempts, "rules": not args.no_rules,
+            "recovery": not args.no_recovery})
+    except (RosUnavailable, ImportError) as error:
+        raise RosMissing(str(error)) from None
+    try:
+        for line in startup_lines(model):
+            runtime.node.get_logger().info(line)
+        systems = sum(isinstance(p, SystemPart) for p in model.parts.values())
+        print(f"mode manager {args.node_name} serving {systems} system(s) and {len(model.nodes)} node(s) of "
+              f"{model.path}; Ctrl-C to stop", flush=True)
+        stop.wait()
+    finally:
+        runtime.close()
+
+
+def install_stop_handlers(stop: threading.Event) -> None:
+    def handler(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)

@@ -1,0 +1,494 @@
+"""RosBackend: the :class:`~sm_bt.engine.backend.Backend` protocol served by real ROS 2 nodes.
+
+Every node part of the model is reached through its standard services: ``change_state`` and
+``get_state`` (lifecycle), ``set_parameters_atomically`` and ``get_parameters``, and observed
+through ``/{node}/transition_event`` and ``/parameter_events``. Works for any lifecycle node
+(rclpy or rclcpp) and for plain nodes with parameters only.
+
+What the reference manager does not do, and this backend does:
+
+* **Live state on (re)appearance.** A node whose services show up is asked for its state and
+  parameters before anything is reported; transition and parameter events that arrive meanwhile
+  are applied after that report, in order.
+* **Liveness.** After a crash, DDS keeps showing a node for its lease (20 s with Fast DDS), so
+  discovery alone cannot tell. Every present node is probed (``get_state``, or ``get_parameters``
+  for plain nodes) every ``probe_interval`` s; no answer for ``liveness_timeout`` s means vanished.
+  While a call of ours is in flight the node may be busy in a long transition callback, which
+  also blocks its other services: then only that call's own timeout applies. A node that leaves
+  the graph cleanly is reported at once.
+* **Timeouts everywhere.** Every call has one; a call that times out fails and is removed from
+  the client, and every call in flight on a vanished node fails with the reason.
+* **Safe transitions.** Requests carry the transition's id *and* label: rclpy looks the label up
+  and answers ``success=false`` for one invalid in the node's state (it would crash its process on
+  an invalid id); rclcpp checks the id.
+
+Threads: rclpy calls back in its executor thread, timers run in the :class:`WallClock` thread;
+every report and ``done`` goes to the listener through the clock (delay 0), so they reach the
+manager one at a time, in order, and never from inside a call. The rclpy node must be spun by an
+executor (see :mod:`sm_bt.ros.runtime`); the backend never spins it itself.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from lifecycle_msgs.msg import Transition as TransitionMsg
+from lifecycle_msgs.msg import TransitionEvent
+from lifecycle_msgs.srv import ChangeState, GetState
+from rcl_interfaces.msg import ParameterEvent
+from rcl_interfaces.srv import GetParameters, ListParameters, SetParametersAtomically
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_parameter_events
+
+from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
+from sm_bt.engine.clock import TimerHandle, WallClock
+from sm_bt.engine.lifecycle import Transition
+from sm_bt.model.states import State
+from sm_bt.model.types import Model, NodePart, ParamValue
+from sm_bt.ros.parameters import from_parameter_value, from_parameters, to_parameters
+
+log = logging.getLogger("sm_bt.ros.backend")
+
+
+class _Presence(enum.Enum):
+    ABSENT = "absent"  # never seen, or vanished
+    ACQUIRING = "acquiring"  # services seen; asking for its live state and parameters
+    PRESENT = "present"  # reported to the listener
+
+
+@dataclass(eq=False)
+class _Call:
+    """One request in flight on a node; ``finish`` is idempotent."""
+
+    peer: _Peer
+    label: str
+    client: Any
+    future: Any = None
+    timer: TimerHandle | None = None
+    on_result: Callable[[Any], None] | None = None  # gets the response
+    on_failure: Callable[[str], None] | None = None  # gets the reason
+    busy: bool = True  # the node may be blocked while serving it (suspends the liveness watchdog)
+    finished: bool = False
+
+
+@dataclass(eq=False)
+class _Peer:
+    """What the backend knows about one node of the model."""
+
+    part: str
+    fqn: str
+    parameter_names: tuple[str, ...]
+    change_state: Any
+    get_state: Any
+    set_parameters: Any
+    get_parameters: Any
+    list_parameters: Any
+    presence: _Presence = _Presence.ABSENT
+    lifecycle: bool = True
+    state: State = State.UNKNOWN
+    calls: set[_Call] = field(default_factory=set)
+    last_heard: float = 0.0
+    probe: _Call | None = None
+    last_probe: float = 0.0
+    plain_since: float | None = None  # when parameter services were first seen without lifecycle ones
+    # Events seen while acquiring, applied after the node is reported (oldest first).
+    buffered_state: State | None = None
+    buffered_parameters: dict[str, ParamValue] = field(default_factory=dict)
+    events: int = 0  # transition events received; tells a probe answer from a stale one
+    gone: str = ""  # why it vanished (while absent after having been present)
+
+    @property
+    def busy(self) -> bool:
+        return any(call.busy and not call.finished for call in self.calls)
+
+
+class RosBackend:
+    """The nodes of ``model``, reached through ``node`` (an rclpy node spun by an executor).
+
+    ``call_timeout`` bounds every state change and parameter set, ``acquire_timeout`` the
+    queries made when a node (re)appears (the first call after discovery is slow), and a node
+    silent for ``liveness_timeout`` s while probed every ``probe_interval`` s is reported
+    vanished. A node with parameter services but no lifecycle services for ``plain_after`` s is
+    a plain node. ``poll_interval`` is how often the graph is looked at.
+    """
+
+    def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
+                 acquire_timeout: float = 2.0, probe_interval: float = 0.5, liveness_timeout: float = 2.0,
+                 plain_after: float = 1.0, poll_interval: float = 0.1) -> None:
+        self._node = node
+        self._model = model
+        self._clock = clock if clock is not None else WallClock("sm_bt-ros-clock")
+        self.call_timeout = call_timeout
+        self.acquire_timeout = acquire_timeout
+        self.probe_interval = probe_interval
+        self.liveness_timeout = liveness_timeout
+        self.plain_after = plain_after
+        self.poll_interval = poll_interval
+        self._lock = threading.Lock()
+        self._peers: dict[str, _Peer] = {}
+        self._by_fqn: dict[str, _Peer] = {}
+        self._listener: BackendListener | None = None
+        self._subscriptions: list[Any] = []
+        self._poll_timer: TimerHandle | None = None
+
+    @property
+    def clock(self) -> WallClock:
+        return self._clock
+
+    @property
+    def node(self) -> Node:
+        return self._node
+
+    # -- Backend protocol ---------------------------------------------------------------------------
+
+    def attach(self, nodes: Sequence[str], listener: BackendListener) -> None:
+        with self._lock:
+            if self._listener is not None:
+                raise RuntimeError("RosBackend is already attached")
+            self._listener = listener
+            for name in nodes:
+                self._peers[name] = self._make_peer(name)
+                self._by_fqn[self._peers[name].fqn] = self._peers[name]
+            self._subscriptions.append(self._node.create_subscription(
+                ParameterEvent, "/parameter_events", self._on_parameter_event, qos_profile_parameter_events))
+        self._poll_timer = self._clock.call_later(0.0, self._poll)
+
+    def detach(self) -> None:
+        with self._lock:
+            self._listener = None
+            if self._poll_timer is not None:
+                self._poll_timer.cancel()
+            calls = [call for peer in self._peers.values() for call in peer.calls]
+        for call in calls:
+            self._finish(call, failure="backend detached")
+        with self._lock:
+            for subscription in self._subscriptions:
+                self._node.destroy_subscription(subscription)
+            for peer in self._peers.values():
+                for client in (peer.change_state, peer.get_state, peer.set_parameters, peer.get_parameters,
+                               peer.list_parameters):
+                    self._node.destroy_client(client)
+            self._subscriptions.clear()
+            self._peers.clear()
+            self._by_fqn.clear()
+
+    def change_state(self, node: str, transition: Transition, done: Done) -> None:
+        peer = self._peer(node)
+        with self._lock:
+            refusal = self._refusal(peer)
+            if refusal is None and not peer.lifecycle:
+                refusal = f"node {node} has no lifecycle services (parameters only): it cannot {transition.label}"
+        if refusal is not None:
+            self._dispatch(lambda: done(CallResult(False, refusal)))
+            return
+        request = ChangeState.Request()
+        request.transition = TransitionMsg(id=int(transition), label=transition.label)
+
+        def answered(response: Any) -> None:
+            if response.success:
+                self._dispatch(lambda: done(CallResult(True)))
+            else:
+                self._dispatch(lambda: done(CallResult(False, f"{transition.label} of {node} failed: the node "
+                                                              "answered success=false (refused in its state, "
+                                                              "or its callback failed)")))
+
+        self._call(peer, peer.change_state, request, f"change_state {transition.label}", self.call_timeout,
+                   answered, lambda reason: self._dispatch(lambda: done(CallResult(False, reason))))
+
+    def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
+        peer = self._peer(node)
+        with self._lock:
+            refusal = self._refusal(peer)
+        request = SetParametersAtomically.Request()
+        try:
+            request.parameters = to_parameters(parameters)
+        except TypeError as error:
+            refusal = f"set_parameters on {node}: {error}"
+        if refusal is not None:
+            self._dispatch(lambda: done(CallResult(False, refusal)))
+            return
+
+        def answered(response: Any) -> None:
+            result = response.result
+            if result.successful:
+                self._dispatch(lambda: done(CallResult(True)))
+            else:
+                why = result.reason or "no reason given"
+                self._dispatch(lambda: done(CallResult(False, f"set_parameters on {node} rejected: {why}")))
+
+        self._call(peer, peer.set_parameters, request, "set_parameters_atomically", self.call_timeout,
+                   answered, lambda reason: self._dispatch(lambda: done(CallResult(False, reason))))
+
+    # -- discovery, acquisition, liveness (clock thread) ------------------------------------------
+
+    def _poll(self) -> None:
+        now = self._clock.now()
+        with self._lock:
+            if self._listener is None:
+                return
+            peers = list(self._peers.values())
+        for peer in peers:
+            try:
+                self._look_at(peer, now)
+            except Exception:  # one node's trouble must not stop the others being watched
+                log.exception("watching %s failed", peer.fqn)
+        with self._lock:
+            if self._listener is not None:
+                self._poll_timer = self._clock.call_later(self.poll_interval, self._poll)
+
+    def _look_at(self, peer: _Peer, now: float) -> None:
+        lifecycle_ready = peer.get_state.service_is_ready()
+        parameters_ready = peer.get_parameters.service_is_ready()
+        with self._lock:
+            presence = peer.presence
+            if presence is _Presence.PRESENT:
+                gone = not (lifecycle_ready if peer.lifecycle else parameters_ready)
+                silent = (peer.probe is not None and not peer.busy
+                          and now - peer.last_heard > self.liveness_timeout)
+                probe_due = peer.probe is None and now - peer.last_probe >= self.probe_interval
+            if presence is _Presence.ABSENT:
+                if lifecycle_ready:
+                    peer.plain_since = None
+                elif parameters_ready:
+                    peer.plain_since = now if peer.plain_since is None else peer.plain_since
+                else:
+                    peer.plain_since = None
+        if presence is _Presence.PRESENT:
+            if gone:
+                self._vanish(peer, f"node {peer.fqn} left the ROS graph")
+            elif silent:
+                self._vanish(peer, f"no answer from {peer.fqn} for {self.liveness_timeout:g} s (process gone?)")
+            elif probe_due:
+                self._probe(peer, now)
+        elif presence is _Presence.ABSENT:
+            if lifecycle_ready:
+                self._acquire(peer, lifecycle=True)
+            elif peer.plain_since is not None and now - peer.plain_since >= self.plain_after:
+                self._acquire(peer, lifecycle=False)
+
+    def _acquire(self, peer: _Peer, *, lifecycle: bool) -> None:
+        """Ask a node that showed up for its state (lifecycle nodes) and parameters, then report it."""
+        with self._lock:
+            peer.presence = _Presence.ACQUIRING
+            peer.buffered_state = None
+            peer.buffered_parameters = {}
+            events_before = peer.events
+
+        def failed(reason: str) -> None:
+            with self._lock:
+                if peer.presence is _Presence.ACQUIRING:
+                    peer.presence = _Presence.ABSENT
+            log.debug("acquiring %s failed: %s", peer.fqn, reason)
+
+        def got_parameters(state: State, names: list[str], response: Any) -> None:
+            values = {name: value for name, message in zip(names, response.values, strict=False)
+                      if (value := from_parameter_value(message)) is not None}
+            with self._lock:
+                if peer.presence is not _Presence.ACQUIRING or self._listener is None:
+                    return
+                listener = self._listener
+                if peer.buffered_state is not None and peer.events != events_before:
+                    state = peer.buffered_state  # it moved while we asked
+                peer.presence, peer.lifecycle, peer.state, peer.gone = _Presence.PRESENT, lifecycle, state, ""
+                peer.last_heard = peer.last_probe = self._clock.now()
+                later = dict(peer.buffered_parameters)
+            log.info("node %s appeared: %s%s", peer.fqn, state.label, "" if lifecycle else " (parameters only)")
+            report = NodeReport(state, values, lifecycle)
+            self._dispatch(lambda: listener.node_appeared(peer.part, report))
+            if later:
+                self._dispatch(lambda: listener.node_parameters(peer.part, later))
+
+        def ask_values(state: State, response: Any) -> None:
+            # rclpy answers get_parameters with nothing at all when one name is undeclared: ask
+            # only for the model's parameters the node has.
+            declared = set(response.result.names)
+            names = [name for name in peer.parameter_names if name in declared]
+            request = GetParameters.Request(names=names)
+            self._call(peer, peer.get_parameters, request, "get_parameters", self.acquire_timeout,
+                       lambda answer: got_parameters(state, names, answer), failed, busy=False)
+
+        def ask_parameters(state: State) -> None:
+            request = ListParameters.Request(prefixes=[], depth=ListParameters.Request.DEPTH_RECURSIVE)
+            self._call(peer, peer.list_parameters, request, "list_parameters", self.acquire_timeout,
+                       lambda response: ask_values(state, response), failed, busy=False)
+
+        if lifecycle:
+            self._call(peer, peer.get_state, GetState.Request(), "get_state", self.acquire_timeout,
+                       lambda response: ask_parameters(_state_of(response.current_state.id)), failed, busy=False)
+        else:
+            ask_parameters(State.ACTIVE)
+
+    def _probe(self, peer: _Peer, now: float) -> None:
+        with self._lock:
+            peer.last_probe = now
+            events_before = peer.events
+
+        def answered(response: Any) -> None:
+            with self._lock:
+                peer.probe = None
+                if peer.presence is not _Presence.PRESENT or not peer.lifecycle:
+                    return
+                state = _state_of(response.current_state.id)
+                # Only a probe that no transition event overtook, with no call of ours in flight,
+                # may correct the state (a missed event); anything else may be stale.
+                stale = peer.events != events_before or peer.busy or state is peer.state
+                if not stale:
+                    peer.state = state
+                listener = self._listener
+            if not stale and listener is not None:
+                log.warning("node %s is %s (a transition event was missed)", peer.fqn, state.label)
+                self._dispatch(lambda: listener.node_state(peer.part, state))
+
+        def unanswered(reason: str) -> None:
+            with self._lock:
+                peer.probe = None
+
+        if peer.lifecycle:
+            call = self._call(peer, peer.get_state, GetState.Request(), "get_state (liveness)",
+                              self.liveness_timeout, answered, unanswered, busy=False)
+        else:
+            call = self._call(peer, peer.get_parameters, GetParameters.Request(names=[]), "get_parameters (liveness)",
+                              self.liveness_timeout, answered, unanswered, busy=False)
+        with self._lock:
+            if not call.finished:
+                peer.probe = call
+
+    def _vanish(self, peer: _Peer, reason: str) -> None:
+        with self._lock:
+            if peer.presence is not _Presence.PRESENT:
+                return
+            peer.presence, peer.state, peer.probe, peer.gone = _Presence.ABSENT, State.UNKNOWN, None, reason
+            calls = list(peer.calls)
+            listener = self._listener
+        log.warning("node %s vanished: %s", peer.fqn, reason)
+        if listener is not None:
+            self._dispatch(lambda: listener.node_vanished(peer.part, reason))
+        for call in calls:
+            self._finish(call, failure=f"node {peer.part} vanished: {reason}")
+
+    # -- topics (executor thread) -------------------------------------------------------------------
+
+    def _on_transition_event(self, peer: _Peer, message: TransitionEvent) -> None:
+        state = _state_of(message.goal_state.id)
+        with self._lock:
+            peer.events += 1
+            peer.last_heard = self._clock.now()
+            if peer.presence is _Presence.ACQUIRING:
+                peer.buffered_state = state
+                return
+            if peer.presence is not _Presence.PRESENT or state is peer.state:
+                return
+            peer.state = state
+            listener = self._listener
+        if listener is not None:
+            self._dispatch(lambda: listener.node_state(peer.part, state))
+
+    def _on_parameter_event(self, message: ParameterEvent) -> None:
+        peer = self._by_fqn.get(message.node)
+        if peer is None:
+            return
+        changed = {name: value for name, value in
+                   from_parameters(list(message.new_parameters) + list(message.changed_parameters)).items()
+                   if name in peer.parameter_names}
+        if not changed:
+            return
+        with self._lock:
+            peer.last_heard = self._clock.now()
+            if peer.presence is _Presence.ACQUIRING:
+                peer.buffered_parameters.update(changed)
+                return
+            listener = self._listener if peer.presence is _Presence.PRESENT else None
+        if listener is not None:
+            self._dispatch(lambda: listener.node_parameters(peer.part, changed))
+
+    # -- calls ---------------------------------------------------------------------------------------
+
+    def _call(self, peer: _Peer, client: Any, request: Any, label: str, timeout: float,
+              on_result: Callable[[Any], None], on_failure: Callable[[str], None], *, busy: bool = True) -> _Call:
+        call = _Call(peer, label, client, on_result=on_result, on_failure=on_failure, busy=busy)
+        with self._lock:
+            peer.calls.add(call)
+        call.timer = self._clock.call_later(
+            timeout, lambda: self._finish(call, failure=f"{label} on {peer.part}: no answer within {timeout:g} s"))
+        future = client.call_async(request)
+        call.future = future
+        future.add_done_callback(lambda done: self._answered(call, done))
+        return call
+
+    def _answered(self, call: _Call, future: Any) -> None:
+        if future.cancelled():
+            return
+        error = future.exception()
+        if error is not None:
+            self._finish(call, failure=f"{call.label} on {call.peer.part} failed: {error}")
+            return
+        with self._lock:
+            call.peer.last_heard = self._clock.now()
+        self._finish(call, response=future.result())
+
+    def _finish(self, call: _Call, *, response: Any = None, failure: str | None = None) -> None:
+        with self._lock:
+            if call.finished:
+                return
+            call.finished = True
+            call.peer.calls.discard(call)
+        if call.timer is not None:
+            call.timer.cancel()
+        if failure is not None:
+            if call.future is not None and not call.future.done():
+                call.client.remove_pending_request(call.future)
+                call.future.cancel()
+            if call.on_failure is not None:
+                call.on_failure(failure)
+        elif call.on_result is not None:
+            call.on_result(response)
+
+    # -- helpers -------------------------------------------------------------------------------------
+
+    def _make_peer(self, part: str) -> _Peer:
+        fqn = "/" + part.lstrip("/")
+        spec = self._model.part(part)
+        if not isinstance(spec, NodePart):
+            raise ValueError(f"{part} is a system of the model, not a node")
+        node = self._node
+        peer = _Peer(
+            part, fqn, tuple(spec.parameter_names),
+            change_state=node.create_client(ChangeState, f"{fqn}/change_state"),
+            get_state=node.create_client(GetState, f"{fqn}/get_state"),
+            set_parameters=node.create_client(SetParametersAtomically, f"{fqn}/set_parameters_atomically"),
+            get_parameters=node.create_client(GetParameters, f"{fqn}/get_parameters"),
+            list_parameters=node.create_client(ListParameters, f"{fqn}/list_parameters"),
+        )
+        self._subscriptions.append(node.create_subscription(
+            TransitionEvent, f"{fqn}/transition_event", lambda message: self._on_transition_event(peer, message),
+            QoSProfile(depth=10)))
+        return peer
+
+    def _peer(self, node: str) -> _Peer:
+        with self._lock:
+            peer = self._peers.get(node)
+        if peer is None:
+            raise KeyError(f"node {node!r} is not attached (nodes: {', '.join(self._peers)})")
+        return peer
+
+    @staticmethod
+    def _refusal(peer: _Peer) -> str | None:
+        if peer.presence is _Presence.PRESENT:
+            return None
+        return f"node {peer.part} is not reachable ({peer.gone or 'not found on the ROS graph yet'})"
+
+    def _dispatch(self, action: Callable[[], None]) -> None:
+        """Hand a report or a ``done`` to the listener's side: the clock thread, in order."""
+        self._clock.call_later(0.0, action)
+
+
+def _state_of(state_id: int) -> State:
+    try:
+        return State(state_id)
+    except ValueError:
+        return State.UNKNOWN

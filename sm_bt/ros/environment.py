@@ -1,0 +1,47 @@
+"""The process environment ROS 2 needs, set before rclpy starts, and a clear error without it.
+
+DDS reads its settings when the first participant starts, so :func:`prepare` must run before
+``rclpy.init``. Discovery stays on this machine unless the user chose otherwise; the domain id
+is the user's, or, for self-contained runs (demo, tests), one chosen for this run so that
+parallel runs on one machine do not see each other's nodes.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+#: What to install when rclpy or the interface package is missing.
+INSTALL_HINT = ("install the ROS 2 extra: `pip install -c constraints.txt -e '.[ros]'` then "
+                "`tools/ensure_system_modes_msgs.sh`, or simply `make test` / `make demo` from the repository")
+
+
+class RosUnavailable(RuntimeError):
+    """rclpy or system_modes_msgs cannot be imported in this environment."""
+
+
+def run_domain_id() -> int:
+    """A domain id for a self-contained run: 10..99, from the process id."""
+    return 10 + os.getpid() % 90
+
+
+def prepare(*, own_domain: bool = False) -> None:
+    """Set what DDS reads at start-up, keeping whatever the user already set.
+
+    ``own_domain`` picks a per-run ``ROS_DOMAIN_ID`` when none is set (demo, tests); otherwise
+    ROS's default domain applies.
+    """
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if own_domain:
+        os.environ.setdefault("ROS_DOMAIN_ID", str(run_domain_id()))
+    if "ROS_LOG_DIR" not in os.environ:
+        os.environ["ROS_LOG_DIR"] = os.path.join(tempfile.gettempdir(), f"sm_bt-roslog-{os.getuid()}")
+
+
+def require_ros() -> None:
+    """Raise :class:`RosUnavailable` with the fix when rclpy or system_modes_msgs is missing."""
+    try:
+        import rclpy  # noqa: F401
+        from system_modes_msgs.srv import ChangeMode  # noqa: F401
+    except ImportError as error:
+        raise RosUnavailable(f"ROS 2 is not available here ({error}): {INSTALL_HINT}") from None

@@ -1,0 +1,97 @@
+"""An embedded mode manager on ROS 2: one rclpy node, its executor thread, the backend, the manager.
+
+``RosRuntime(model)`` is what a mission tree (or ``sm-bt manager``) needs to drive real nodes::
+
+    with RosRuntime(load_model("robot.yaml")) as ros:
+        tree.setup(manager=ros.manager)
+        ...tick...
+
+It owns its own rclpy context (so it never disturbs another user of rclpy in the process), spins
+its node in one background thread (py_trees ticks in the caller's thread; the manager is
+thread-safe), and by default serves the reference's mode manager interface
+(:class:`~sm_bt.ros.manager_node.ModeManagerServer`) from the same node. ``close()`` stops in the
+order rclpy needs: executor first, then the manager and backend, then the node and context.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Mapping
+from types import TracebackType
+from typing import Any
+
+from sm_bt.engine.clock import WallClock
+from sm_bt.engine.manager import ModeManager
+from sm_bt.model.types import Model
+from sm_bt.ros.environment import prepare, require_ros
+
+#: The reference manager's node name.
+MANAGER_NODE_NAME = "__mode_manager"
+
+
+class RosRuntime:
+    """Manage ``model``'s nodes over ROS 2 from this process.
+
+    ``manager_options`` go to :class:`ModeManager` (``grace_period``, ``request_timeout``, ...),
+    ``backend_options`` to :class:`~sm_bt.ros.backend.RosBackend` (``call_timeout``,
+    ``liveness_timeout``, ...). ``serve=False`` leaves out the ROS services and topics (the
+    behaviours alone). ``own_domain`` picks a per-run ``ROS_DOMAIN_ID`` when none is set.
+    """
+
+    def __init__(self, model: Model, *, node_name: str = MANAGER_NODE_NAME, serve: bool = True,
+                 own_domain: bool = False, manager_options: Mapping[str, Any] | None = None,
+                 backend_options: Mapping[str, Any] | None = None) -> None:
+        prepare(own_domain=own_domain)
+        require_ros()
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        from sm_bt.ros.backend import RosBackend
+        from sm_bt.ros.manager_node import ModeManagerServer
+
+        self.model = model
+        self.context = Context()
+        # No rclpy signal handlers: the owner of the process decides what SIGINT means (a mission
+        # tree, sm-bt manager), and the shutdown order stays close()'s.
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.clock = WallClock("sm_bt-ros-clock")
+        self.node = rclpy.create_node(node_name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, name="sm_bt-ros-executor", daemon=True)
+        self._thread.start()
+        self.backend = RosBackend(self.node, model, clock=self.clock, **dict(backend_options or {}))
+        self.manager = ModeManager(model, self.backend, **dict(manager_options or {}))
+        self.server = ModeManagerServer(self.node, self.manager) if serve else None
+        self._closed = False
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        # The context shut down under us: nothing left to do.
+        with contextlib.suppress(ExternalShutdownException):
+            self.executor.spin()
+
+    def close(self) -> None:
+        """Stop serving and managing; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self.executor.shutdown(timeout_sec=2.0)
+        self._thread.join(3.0)
+        if self.server is not None:
+            self.server.close()
+        self.manager.close()
+        self.clock.close()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+    def __enter__(self) -> RosRuntime:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()

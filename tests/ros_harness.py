@@ -1,0 +1,79 @@
+"""The behaviour-scenario harness on real ROS 2: the model's nodes as rclpy lifecycle nodes in another
+process, the manager embedded in the test process (``RosRuntime``), wall time.
+
+Faults go to the nodes as their ``sim.*`` parameters (see :mod:`sm_bt.ros.sim_nodes`), set with a
+plain ``set_parameters`` call that must be confirmed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import py_trees
+from harness import MANAGER_OPTIONS, tick_loop, wait_loop
+from ros_processes import NodeProcess, call
+from tree_helpers import Tick
+
+from sm_bt.engine.lifecycle import Transition
+from sm_bt.engine.requests import Request
+from sm_bt.model.types import Model, ParamValue
+from sm_bt.ros.runtime import RosRuntime
+
+#: Short enough that a test notices a dead node quickly, long enough for a loaded CI machine.
+BACKEND_OPTIONS: dict[str, Any] = {"call_timeout": 5.0, "acquire_timeout": 2.0, "liveness_timeout": 2.0}
+DISCOVERY_LIMIT = 15.0
+
+
+class RosHarness:
+    """``model``'s nodes in ``process`` (already READY), managed from this process."""
+
+    def __init__(self, model: Model, process: NodeProcess, **manager_options: Any) -> None:
+        self.process = process
+        options = {**MANAGER_OPTIONS, **manager_options}
+        self.runtime = RosRuntime(model, node_name="sm_bt_test_manager", manager_options=options,
+                                  backend_options=BACKEND_OPTIONS)
+        self.manager = self.runtime.manager
+        self._parameter_clients: dict[str, Any] = {}
+        names = [node.name for node in model.nodes]
+        self.wait(lambda: all(self.manager.observation(n).reachable for n in names), DISCOVERY_LIMIT)
+
+    def now(self) -> float:
+        return self.manager.clock.now()
+
+    def tick_until(self, tree: py_trees.trees.BehaviourTree, condition: Callable[[], bool], *,
+                   limit: float = 10.0, step: float = 0.05) -> list[Tick]:
+        return tick_loop(tree, self.now, time.sleep, condition, limit, step)
+
+    def settle(self, request: Request, limit: float = 10.0) -> None:
+        self.wait(lambda: request.done, limit)
+        assert request.succeeded, request.reason
+
+    def wait(self, condition: Callable[[], bool], limit: float = 10.0) -> None:
+        wait_loop(self.now, time.sleep, condition, limit)
+
+    def set_parameter(self, node: str, name: str, value: ParamValue) -> None:
+        """Set one parameter of ``node`` directly (not through the manager); it must be accepted."""
+        from rcl_interfaces.srv import SetParameters
+
+        from sm_bt.ros.parameters import to_parameters
+
+        client = self._parameter_clients.get(node)
+        if client is None:
+            client = self.runtime.node.create_client(SetParameters, f"/{node}/set_parameters")
+            self._parameter_clients[node] = client
+        response = call(client, SetParameters.Request(parameters=to_parameters({name: value})), timeout=3.0)
+        assert response.results[0].successful, f"{node} refused {name}={value!r}: {response.results[0].reason}"
+
+    def fail_next(self, node: str, transition: Transition) -> None:
+        self.set_parameter(node, "sim.fail_next", transition.label)
+
+    def reject_parameters(self, node: str, reason: str) -> None:
+        self.set_parameter(node, "sim.reject_parameters", reason)
+
+    def break_node(self, node: str) -> None:
+        self.set_parameter(node, "sim.broken", True)
+
+    def close(self) -> None:
+        self.runtime.close()

@@ -1,0 +1,320 @@
+"""Helpers for tests that run ROS 2 node processes (``python -m sm_bt.ros.sim_nodes``) and talk to them.
+
+The test session has prepared the environment (conftest: local discovery, a domain id of its own),
+and the processes inherit it. Rules these helpers enforce, because each hazard was seen here:
+every process is stopped by its own PID with SIGINT, then SIGKILL after 3 s (Fast DDS can hang on
+exit); every ROS call has a timeout (a dead server never answers); the test side spins its executor
+in a background thread and waits on futures with events (never ``spin_until_future_complete``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import weakref
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+READY_TIMEOUT = 20.0
+STOP_GRACE = 3.0
+DISCOVERY_TIMEOUT = 10.0
+DISCOVERY_POLL = 0.02
+#: The first call after discovery takes about 0.1 s (the response path matches late).
+FIRST_CALL_TIMEOUT = 2.0
+SHM = Path("/dev/shm")
+
+
+class NodeProcess:
+    """One ``sm_bt.ros.sim_nodes`` process: :meth:`start` waits for READY; output is captured."""
+
+    def __init__(self, model: str, *args: str, ready_timeout: float = READY_TIMEOUT) -> None:
+        self.command = [sys.executable, "-m", "sm_bt.ros.sim_nodes", model, *args]
+        self.ready_timeout = ready_timeout
+        self.process: subprocess.Popen[str] | None = None
+        self.names: list[str] = []
+        self._stdout: list[str] = []
+        self._stderr: list[str] = []
+        self.ready_after = math.nan
+
+    # -- life cycle of the process -----------------------------------------------------------------
+
+    def start(self) -> NodeProcess:
+        """Start the process and wait for its READY line (``AssertionError`` with its stderr otherwise)."""
+        self._stdout = []
+        self._stderr = []
+        self.names = []
+        self._ready = threading.Event()
+        self.started_at = time.monotonic()
+        _processes.add(self)
+        self.process = subprocess.Popen(self.command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                        bufsize=1)
+        # Reader threads: a full pipe would block the child.
+        threading.Thread(target=self._read, args=(self.process.stdout, self._stdout, True), daemon=True).start()
+        threading.Thread(target=self._read, args=(self.process.stderr, self._stderr, False), daemon=True).start()
+        deadline = self.started_at + self.ready_timeout
+        while not self._ready.wait(0.05):
+            if self.process.poll() is not None or time.monotonic() > deadline:
+                how = (f"exited with {self.process.returncode}" if self.process.poll() is not None
+                       else f"not READY after {self.ready_timeout:.0f} s")
+                self.stop()
+                raise AssertionError(f"{' '.join(self.command[1:])}: {how}\nstderr:\n{self.stderr}")
+        self.ready_after = time.monotonic() - self.started_at
+        return self
+
+    def _read(self, stream: Any, lines: list[str], watch_ready: bool) -> None:
+        for line in stream:
+            lines.append(line.rstrip("\n"))
+            if watch_ready and line.startswith("READY "):
+                self.names = [name for name in line[len("READY "):].strip().split(",") if name]
+                self._ready.set()
+        stream.close()
+
+    def stop(self, grace: float = STOP_GRACE) -> int | None:
+        """SIGINT, wait up to ``grace`` s, then SIGKILL. Returns the exit code (negative: killed)."""
+        process = self.process
+        if process is None:
+            return None
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+            try:
+                process.wait(grace)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(5)
+        return process.returncode
+
+    def kill(self) -> None:
+        """SIGKILL now (a crash). Peers keep seeing its services for about 20 s (the DDS lease)."""
+        if self.process is not None and self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(5)
+
+    def restart(self) -> None:
+        """Stop (SIGINT, then SIGKILL) and start again with the same arguments."""
+        self.stop()
+        self.start()
+
+    # -- what it said ---------------------------------------------------------------------------------
+
+    @property
+    def pid(self) -> int | None:
+        return None if self.process is None else self.process.pid
+
+    @property
+    def alive(self) -> bool:
+        return self.process is not None and self.process.poll() is None
+
+    @property
+    def returncode(self) -> int | None:
+        return None if self.process is None else self.process.poll()
+
+    @property
+    def stdout(self) -> str:
+        return "\n".join(self._stdout)
+
+    @property
+    def stderr(self) -> str:
+        return "\n".join(self._stderr)
+
+
+# -- Fast DDS shared-memory files ---------------------------------------------------------------------
+
+_SHM_PATTERNS = ("fastrtps_*", "sem.fastrtps_*")
+
+
+def shm_files() -> set[Path]:
+    """The Fast DDS shared-memory files now in /dev/shm."""
+    if not SHM.is_dir():
+        return set()
+    return {path for pattern in _SHM_PATTERNS for path in SHM.glob(pattern)}
+
+
+def shm_files_in_use() -> set[Path]:
+    """Fast DDS files some process (of any run on this machine we can see) has mapped or open."""
+    used: set[Path] = set()
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            for line in (entry / "maps").read_text().splitlines():
+                if "/dev/shm/" in line:
+                    used.add(Path(line[line.index("/dev/shm/"):].split(" (deleted)")[0]))
+            for fd in (entry / "fd").iterdir():
+                target = os.readlink(fd)
+                if target.startswith("/dev/shm/"):
+                    used.add(Path(target))
+        except OSError:  # gone meanwhile, or not ours to read
+            continue
+    return used
+
+
+#: Recorded when this module is first imported (by conftest or a test module): files older than the
+#: session are somebody else's and are never removed.
+SHM_AT_SESSION_START = shm_files()
+_live_contexts = 0
+_live_lock = threading.Lock()
+#: Every process started by this session (stopped ones included): the clean-up waits for all of them.
+_processes: weakref.WeakSet[NodeProcess] = weakref.WeakSet()
+
+
+def remove_stale_shm_files() -> list[Path]:
+    """Remove the Fast DDS files this session created that no process uses any more.
+
+    Fast DDS leaves them behind after kills (and some even after clean exits). Only called when none
+    of our processes and no test-side context is alive; files of parallel runs are still mapped by
+    their processes and are kept.
+    """
+    with _live_lock:
+        if _live_contexts or any(process.alive for process in list(_processes)):
+            return []
+    stale = shm_files() - SHM_AT_SESSION_START
+    if not stale:
+        return []
+    stale -= shm_files_in_use()
+    removed = []
+    for path in sorted(stale):
+        try:
+            path.unlink()
+            removed.append(path)
+        except OSError:
+            pass
+    return removed
+
+
+Starter = Callable[..., NodeProcess]
+
+
+@pytest.fixture(name="node_processes")
+def node_processes_fixture() -> Iterator[Starter]:
+    """``start(model, *args) -> NodeProcess`` (READY already seen); every process started is stopped
+    by PID at teardown, then the session's stale Fast DDS files are removed."""
+    started: list[NodeProcess] = []
+
+    def start(model: str, *args: str, ready_timeout: float = READY_TIMEOUT) -> NodeProcess:
+        process = NodeProcess(model, *args, ready_timeout=ready_timeout)
+        started.append(process)  # before start(): a process that never gets READY is stopped too
+        return process.start()
+
+    yield start
+    for process in started:
+        process.stop()
+    remove_stale_shm_files()  # does nothing while a process of the session or a test context lives
+
+
+# -- the test process's side -------------------------------------------------------------------------
+
+
+class RosContext:
+    """A fresh rclpy context with one node, its executor spinning in a daemon thread."""
+
+    def __init__(self, name: str = "sm_bt_test") -> None:
+        global _live_contexts
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        with _live_lock:
+            _live_contexts += 1
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node: Any = rclpy.create_node(name, context=self.context)
+        self._clients: dict[tuple[Any, str], Any] = {}
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, name="ros-test-spin", daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        with contextlib.suppress(ExternalShutdownException):  # the context was shut down under us
+            self.executor.spin()
+
+    def client(self, service_type: Any, name: str) -> Any:
+        """The client of service ``name`` (one per name: a new client would need discovery again)."""
+        key = (service_type, name)
+        if key not in self._clients:
+            self._clients[key] = self.node.create_client(service_type, name)
+        return self._clients[key]
+
+    def call(self, service_type: Any, name: str, request: Any, timeout: float = FIRST_CALL_TIMEOUT) -> Any:
+        """Call service ``name`` (waiting for its discovery first) and return the response."""
+        client = self.client(service_type, name)
+        if not client.service_is_ready():
+            self.wait_for([client])
+        return call(client, request, timeout)
+
+    def subscribe(self, message_type: Any, topic: str, depth: int = 50) -> list[Any]:
+        """A list the messages on ``topic`` are appended to (by the executor thread)."""
+        received: list[Any] = []
+        self.node.create_subscription(message_type, topic, received.append, depth)
+        return received
+
+    def wait_for(self, clients: Sequence[Any], timeout: float = DISCOVERY_TIMEOUT) -> float:
+        """Poll ``service_is_ready()`` every 20 ms until all are; returns the seconds it took."""
+        start = time.monotonic()
+        while True:
+            missing = [client.srv_name for client in clients if not client.service_is_ready()]
+            if not missing:
+                return time.monotonic() - start
+            if time.monotonic() - start > timeout:
+                raise AssertionError(f"services not discovered after {timeout:.0f} s: {', '.join(missing)}")
+            time.sleep(DISCOVERY_POLL)
+
+    def close(self) -> None:
+        global _live_contexts
+        self.executor.shutdown(timeout_sec=2.0)
+        self.thread.join(timeout=3.0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
+        with _live_lock:
+            _live_contexts -= 1
+        remove_stale_shm_files()
+
+
+@pytest.fixture(name="ros_context")
+def ros_context_fixture() -> Iterator[RosContext]:
+    """A :class:`RosContext` per test, shut down at teardown (executor, thread, node, context)."""
+    ros = RosContext()
+    try:
+        yield ros
+    finally:
+        ros.close()
+
+
+def call(client: Any, request: Any, timeout: float = 1.0) -> Any:
+    """The response of ``client`` to ``request``; ``AssertionError`` after ``timeout`` seconds.
+
+    Waits on an event set by the future (the executor spins elsewhere); on timeout the pending
+    request is removed, or the client would keep it forever.
+    """
+    done = threading.Event()
+    future = client.call_async(request)
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout):
+        client.remove_pending_request(future)
+        raise AssertionError(f"{client.srv_name}: no response within {timeout} s to {request}")
+    exception = future.exception()
+    if exception is not None:
+        raise AssertionError(f"{client.srv_name}: call failed: {exception!r}")
+    return future.result()
+
+
+def wait_until(condition: Callable[[], bool], timeout: float, message: str, poll: float = 0.01) -> float:
+    """Poll ``condition`` until true; the seconds it took, or ``AssertionError(message)``."""
+    start = time.monotonic()
+    while not condition():
+        if time.monotonic() - start > timeout:
+            raise AssertionError(f"{message} (after {timeout} s)")
+        time.sleep(poll)
+    return time.monotonic() - start

@@ -1,0 +1,187 @@
+#!/usr/bin/env bash
+# Build (once) and install the system_modes_msgs interface package into a venv. Idempotent.
+#
+#   tools/ensure_system_modes_msgs.sh [VENV]     VENV: default $VIRTUAL_ENV, else <repo>/.venv
+#
+# The venv must already hold the ROS 2 Jazzy runtime (pip install -c constraints.txt -e '.[ros]').
+# Paths, fastest first:
+#   up to date  (~0.3 s)  the venv's stamp matches the source hash and the 5 types import and load
+#                         their C typesupport;
+#   cached      (~1 s)    build/wheels/<hash>/ holds the wheel: pip install --no-deps it;
+#   build       (~30-40 s) pip wheel --no-deps (scikit-build-core + the pinned Jazzy build wheels in
+#                         pip's isolated build env; needs gcc/g++, cmake >= 3.20 and the package index).
+# <hash> covers interfaces/system_modes_msgs (package.xml, CMakeLists.txt, pyproject.toml,
+# build-constraints.txt, msg/, srv/) and the venv's Python version (the wheel is cp3X-specific).
+# The build log goes to build/logs/system_modes_msgs-<hash>.log.
+set -euo pipefail
+
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+pkg="$root/interfaces/system_modes_msgs"
+venv="${1:-${VIRTUAL_ENV:-$root/.venv}}"
+venv="$(cd "$venv" 2>/dev/null && pwd)" || { echo "system_modes_msgs: ERROR: no venv at '${1:-${VIRTUAL_ENV:-$root/.venv}}' (create it first: make .venv/.installed)" >&2; exit 2; }
+py="$venv/bin/python"
+stamp="$venv/.system_modes_msgs.stamp"
+rel() { echo "${1#"$root"/}"; }
+
+die() {  # die <what failed> <details...>
+  {
+    echo
+    echo "system_modes_msgs: ERROR: $1"
+    shift
+    for line in "$@"; do echo "  $line"; done
+    echo
+  } >&2
+  exit 1
+}
+
+[[ -x "$py" ]] || die "no Python at $py" "Create the venv first: make .venv/.installed"
+
+# --- source hash (cheap: no Python start) ------------------------------------------------------
+pyver="$(cd "$venv/lib" && ls -d python3.* 2>/dev/null | head -1)"
+[[ -n "$pyver" ]] || die "cannot tell the Python version of $venv (no lib/python3.*)" "Recreate the venv: make clean && make .venv/.installed"
+cd "$pkg"
+shopt -s nullglob
+sources=(package.xml CMakeLists.txt pyproject.toml build-constraints.txt msg/*.msg srv/*.srv action/*.action)
+shopt -u nullglob
+for f in package.xml CMakeLists.txt pyproject.toml build-constraints.txt; do
+  [[ -f "$f" ]] || die "$(rel "$pkg")/$f is missing"
+done
+hash="$(
+  { echo "$pyver"; for f in "${sources[@]}"; do printf '%s\0' "$f"; cat "$f"; printf '\0'; done; } \
+    | sha256sum | cut -c1-16
+)"
+cd "$root"
+
+check() {  # all five types import and load their C typesupport (a plain import loads no .so)
+  "$py" - <<'PY'
+from system_modes_msgs.msg import Mode, ModeEvent
+from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
+for t in (Mode, ModeEvent, ChangeMode, GetMode, GetAvailableModes):
+    t.__class__.__import_type_support__()
+    assert t._TYPE_SUPPORT is not None, t
+PY
+}
+
+# --- fast path ---------------------------------------------------------------------------------
+if [[ -f "$stamp" && "$(cat "$stamp")" == "$hash" ]] && check 2>/dev/null; then
+  echo "system_modes_msgs: up to date ($hash)"
+  exit 0
+fi
+
+# Serialise concurrent runs (two `make` in parallel) on the wheel cache; re-check under the lock.
+mkdir -p "$root/build/wheels" "$root/build/logs"
+if command -v flock >/dev/null 2>&1; then
+  exec 9>"$root/build/wheels/.lock"
+  flock 9
+  if [[ -f "$stamp" && "$(cat "$stamp")" == "$hash" ]] && check 2>/dev/null; then
+    echo "system_modes_msgs: up to date ($hash)"
+    exit 0
+  fi
+fi
+
+# The runtime the wheel installs next to (and links against) must be there.
+if ! rclpy_err="$("$py" -c 'import rclpy, rosidl_generator_py' 2>&1)"; then
+  die "the ROS 2 Jazzy runtime is missing or broken in $venv (import rclpy failed):" \
+      "$(echo "$rclpy_err" | tail -1)" \
+      "Install it first: $venv/bin/python -m pip install -c constraints.txt -e '.[test,ros]'" \
+      "(make .venv/.installed does this)."
+fi
+
+cache="$root/build/wheels/$hash"
+whl="$(ls "$cache"/ros_system_modes_msgs-*.whl 2>/dev/null | head -1 || true)"
+
+# --- build path --------------------------------------------------------------------------------
+if [[ -z "$whl" ]]; then
+  # Tools first: a failure deep inside pip/CMake is much harder to read.
+  missing=()
+  command -v cc >/dev/null 2>&1 || command -v gcc >/dev/null 2>&1 || missing+=("a C compiler (gcc)")
+  command -v c++ >/dev/null 2>&1 || command -v g++ >/dev/null 2>&1 || missing+=("a C++ compiler (g++)")
+  if ! command -v cmake >/dev/null 2>&1; then
+    missing+=("cmake >= 3.20 (none on PATH)")
+  else
+    cmver="$(cmake --version 2>/dev/null | head -1 | sed -n 's/^cmake version \([0-9][0-9.]*\).*/\1/p')"
+    if [[ -z "$cmver" ]] || [[ "$(printf '%s\n' 3.20 "$cmver" | sort -V | head -1)" != 3.20 ]]; then
+      missing+=("cmake >= 3.20 (found '${cmver:-unknown}' at $(command -v cmake))")
+    fi
+  fi
+  command -v ninja >/dev/null 2>&1 || command -v make >/dev/null 2>&1 || missing+=("make or ninja")
+  if ((${#missing[@]})); then
+    die "cannot build the system_modes_msgs wheel: missing build tools:" \
+        "${missing[@]/#/- }" \
+        "Install them (Debian/Ubuntu: sudo apt-get install build-essential cmake; a newer cmake also" \
+        "comes from PyPI: python3 -m pip install --user cmake==3.31.10), then re-run: make .venv/.installed"
+  fi
+
+  log="$root/build/logs/system_modes_msgs-$hash.log"
+  tmp="$root/build/wheels/.tmp-$hash-$$"
+  rm -rf "$tmp"; mkdir -p "$tmp"
+  echo "system_modes_msgs: building the wheel ($hash, ~30-40 s; log: $(rel "$log")) ..."
+  start=$SECONDS
+  # Clean build environment: a sourced ROS install (/opt/ros/...) must not leak into the build.
+  # PIP_CONSTRAINT reaches pip's isolated build env and pins its transitive dependencies.
+  if env -u AMENT_PREFIX_PATH -u CMAKE_PREFIX_PATH -u COLCON_PREFIX_PATH -u PYTHONPATH \
+       PIP_CONSTRAINT="$pkg/build-constraints.txt" \
+       CMAKE_BUILD_PARALLEL_LEVEL="${CMAKE_BUILD_PARALLEL_LEVEL:-$(nproc 2>/dev/null || echo 2)}" \
+       "$py" -m pip wheel --no-deps --progress-bar off --disable-pip-version-check -v \
+         -w "$tmp" "$pkg" >"$log" 2>&1; then
+    built="$(ls "$tmp"/ros_system_modes_msgs-*.whl 2>/dev/null | head -1 || true)"
+  else
+    built=""
+  fi
+  if [[ -z "$built" ]]; then
+    rm -rf "$tmp"
+    causes=()
+    if grep -q -E "Installing build dependencies: finished with status 'error'|No matching distribution found" "$log"; then
+      causes+=("- the pinned build wheels could not be installed into pip's isolated build env: the package index"
+               "  is unreachable (pip config / PIP_INDEX_URL), or a pin in $(rel "$pkg")/pyproject.toml"
+               "  [build-system] requires or build-constraints.txt is not on it, or two pins conflict.")
+      first="$(grep -m1 -E "ERROR:|No matching distribution|Could not find a version" "$log" || true)"
+      if [[ -n "$first" ]]; then causes+=("  First error: ${first#"${first%%[![:space:]]*}"}"); fi
+    elif grep -q -E "^ *Error processing '" "$log"; then
+      causes+=("- a .msg/.srv definition in $(rel "$pkg") does not parse (rosidl_adapter):")
+      while IFS= read -r l; do causes+=("    ${l#"${l%%[![:space:]]*}"}"); done \
+        < <(grep -m1 -A2 -E "^ *Error processing '" "$log" | grep -v -E "^ *$" || true)
+    elif grep -q -E "CMake Error" "$log"; then
+      causes+=("- CMake failed: an error in $(rel "$pkg") (CMakeLists.txt, package.xml, msg/, srv/),"
+               "  a missing build wheel (\"Could not find a package configuration file provided by X\":"
+               "  add the ros-X wheel, pinned, to [build-system] requires), or a broken compiler / cmake.")
+      causes+=("  First CMake error:")
+      while IFS= read -r l; do causes+=("    ${l#  }"); done < <(grep -m1 -A6 -E "CMake Error" "$log" || true)
+    fi
+    if ((${#causes[@]} == 0)); then
+      causes+=("- unknown: read the log. Usual causes: no gcc/g++ or cmake >= 3.20, a build wheel missing"
+               "  from the index, or an error in $(rel "$pkg").")
+    fi
+    {
+      echo
+      echo "---- last 40 lines of $(rel "$log") ----"
+      tail -n 40 "$log"
+      echo "---- end of log tail ----"
+    } >&2
+    die "building the system_modes_msgs wheel failed after $((SECONDS - start)) s (pip wheel --no-deps $(rel "$pkg"))." \
+        "Likely cause:" "${causes[@]}" \
+        "Full log: $log" \
+        "Fix it, then re-run: make .venv/.installed  (or: tools/ensure_system_modes_msgs.sh $venv)"
+  fi
+  rm -rf "$cache"; mkdir -p "$cache"
+  mv "$built" "$cache/"
+  rm -rf "$tmp"
+  whl="$cache/$(basename "$built")"
+  echo "system_modes_msgs: built $(rel "$whl") in $((SECONDS - start)) s"
+fi
+
+# --- install -----------------------------------------------------------------------------------
+rm -f "$stamp"
+if ! out="$("$py" -m pip install --no-deps --no-index --force-reinstall --disable-pip-version-check -q "$whl" 2>&1)"; then
+  echo "$out" >&2
+  die "pip install of $(rel "$whl") into $venv failed (output above)." \
+      "If the wheel is damaged, delete $(rel "$cache") and re-run."
+fi
+if ! err="$(check 2>&1)"; then
+  echo "$err" >&2
+  die "installed $(rel "$whl"), but the import/typesupport check failed (output above)." \
+      "Likely cause: the venv's ROS runtime does not match the Jazzy pins (check: $py -m pip check)," \
+      "or a stale wheel: delete $(rel "$cache") and re-run."
+fi
+echo "$hash" >"$stamp"
+echo "system_modes_msgs: installed $(rel "$whl") into $venv"
