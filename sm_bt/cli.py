@@ -288,15 +288,17 @@ COMMANDS: list[Command] = [
             run_modes, description="Print the hierarchy of a model: systems (nested ones indented) with "
                                    f"their modes and rules, then every node with its parameter sets. "
                                    f"'{DEFAULT_MODE}' is the reference's default-mode name."),
-    Command("demo", "run the MROS pilot through a mode sequence on simulated nodes", demo.add_arguments, demo.run,
-            description="The pilot on the embedded simulated backend: normal mode, a refused performance "
-                        "request, laser failure handled by a rule, energy saving, recharge, back to normal."),
-    Command("monitor", "show target and actual state/mode of every part as it changes (simulated nodes)",
+    Command("demo", "run the MROS pilot mission tree on simulated nodes (--ros: real rclpy nodes)", demo.add_arguments,
+            demo.run,
+            description="The pilot mission tree (patrol, laser failure, degraded mode, low battery, recharge) on the "
+                        "embedded simulated backend, or with --ros on real rclpy lifecycle nodes in a child process "
+                        "managed over ROS 2."),
+    Command("monitor", "show target and actual state/mode of every part as it changes",
             monitor_cli.add_arguments, monitor_cli.run,
             description="The mode monitor: part, target state, actual state, target mode, actual mode; systems "
                         "then nodes, (*) on inferred values, divergences highlighted. The model's nodes run on "
-                        "the embedded simulated backend; --change requests are made in turn. Watching live "
-                        "ROS nodes (--ros) comes with the ROS backend."),
+                        "the embedded simulated backend, or with --ros are the live ROS 2 nodes; --change requests "
+                        "are made in turn."),
     Command("manager", "run the mode manager as a ROS 2 node (drop-in for system_modes' mode_manager)",
             manager_cli.add_arguments, run_manager,
             description="Serve /{system}/change_state, get_state, get_available_states and /{part}/change_mode, "
@@ -317,7 +319,8 @@ def _version() -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog=PROG, description="System modes for py_trees mission trees: inspect SMH model files.")
+        prog=PROG, description="System modes for py_trees mission trees: check and inspect SMH model files, run the "
+                    "demo, watch modes, serve the mode manager on ROS 2.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for command in COMMANDS:

@@ -7,14 +7,26 @@ the tree changes goes through mode requests to the embedded manager. The narrati
 requests and their confirmations with timings, divergences, recoveries and contingencies, the
 tree at key moments and the mode monitor, then a summary. Virtual time runs faster than wall
 time (``--speed``).
+
+The same demo runs on two platforms (:class:`Platform`): by default simulated nodes
+(:class:`SimulatedPlatform`: the simulated backend on a virtual clock, the laser failure through
+:class:`~sm_bt.sim.world.LaserDevice`), and with ``--ros`` real rclpy lifecycle nodes in a child
+process (:class:`sm_bt.ros.demo_nodes.RosPlatform`: the manager on ROS 2 and a wall clock, the laser
+failure as the node's ``sim.broken`` parameter). On ROS, mode changes, grace periods and timeouts
+take real time while the world (driving, recharging, the laser schedule) runs ``--speed`` times
+faster (:attr:`World.time_scale <sm_bt.sim.world.World.time_scale>`).
 """
 
 from __future__ import annotations
 
 import argparse
+import enum
+import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import py_trees
 from py_trees.blackboard import Blackboard
@@ -23,13 +35,14 @@ from rich.console import Console
 
 from sm_bt.arguments import non_negative, positive_int
 from sm_bt.bundled import path as bundled_model
+from sm_bt.engine.clock import Clock
 from sm_bt.engine.events import Cause, Event, EventKind
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.loader import load_model
 from sm_bt.model.states import State
-from sm_bt.model.types import NodePart
-from sm_bt.monitor import Monitor, terminal_console
+from sm_bt.model.types import Model, NodePart
+from sm_bt.monitor import Monitor, render_rich, snapshot, terminal_console
 from sm_bt.sim import SimBackend
 from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
@@ -44,18 +57,112 @@ TREES: dict[str, Callable[[int], py_trees.behaviour.Behaviour]] = {
     "pilot": lambda cycles: pilot.create_root(cycles),
     "metacontrol": lambda cycles: pilot_metacontrol.create_root(cycles),
 }
+#: The manager's options on both platforms. One recovery attempt: a laser that fails again at once
+#: is then left to the tree.
+MANAGER_OPTIONS: dict[str, Any] = {"request_timeout": 10.0, "grace_period": 1.0, "recovery_attempts": 1}
+#: The default laser repair on simulated nodes (world seconds).
+REPAIR_AT = 40.0
+#: On ROS the default repair comes once the pilot has been in degraded mode this long (world
+#: seconds; on simulated nodes it is 22.2 s). A fixed time cannot do it there: handling the failure
+#: (two grace periods and a recovery) takes about 2.3 s of real time, i.e. 2.3 x speed seconds of
+#: world time, and meanwhile the robot drives on, so the battery could run low in degraded mode.
+DEGRADED_FOR = 22.0
+#: ... and at the latest this many wall seconds (as world time) plus 25 s after the failure, in case
+#: the tree never switches to degraded mode.
+ROS_REPAIR_WALL_MARGIN = 5.0
+
+
+class Auto(enum.Enum):
+    """The default laser repair: at :data:`REPAIR_AT` on simulated nodes; on ROS after
+    :data:`DEGRADED_FOR` in degraded mode."""
+
+    AUTO = "auto"
 
 
 @dataclass
 class Options:
-    laser_failure_at: float | None = 15.0
-    laser_repair_at: float | None = 40.0
+    laser_failure_at: float | None = 15.0  # world seconds
+    laser_repair_at: float | Auto | None = Auto.AUTO  # world seconds, never, or the default (Auto)
     cycles: int = 2
-    speed: float = 25.0
+    speed: float = 25.0  # world seconds per wall second (simulated: 0 = as fast as possible)
     quiet: bool = False
     tree: str = "pilot"
-    tick: float = 0.1  # virtual seconds between ticks
-    limit: float = 1500.0  # virtual seconds before giving up
+    tick: float = 0.1  # virtual seconds between ticks (simulated platform)
+    limit: float = 1500.0  # world seconds before giving up
+    ros: bool = False  # real rclpy lifecycle nodes in a child process instead of simulated ones
+
+
+class Platform(Protocol):
+    """What the demo runs on: the manager, how time passes between ticks, and the laser's node.
+
+    The demo owns the world and the tree; a platform supplies the manager (whose clock the
+    actions measure time with), lets ``tick`` seconds of that clock pass between ticks, and makes
+    the laser's node fail by itself while the laser is broken.
+    """
+
+    manager: ModeManager
+    #: Seconds of the manager's clock between ticks.
+    tick: float
+    #: "virtual" or "wall": what the manager's clock measures, for the narrative and the summary.
+    time_unit: str
+    #: What the nodes are, for the narrative ("simulated nodes", ...).
+    description: str
+
+    def advance(self, seconds: float) -> None:
+        """Let ``seconds`` of the manager's clock pass (the nodes act meanwhile)."""
+
+    def break_laser(self) -> None:
+        """The laser breaks: ``world.laser_ok`` becomes false and the node fails by itself while it is."""
+
+    def repair_laser(self) -> None:
+        """The laser works again (``world.laser_ok``); its node no longer fails."""
+
+    def close(self) -> None:
+        """Release what the platform started; idempotent."""
+
+
+class SimulatedPlatform:
+    """Simulated nodes on a virtual clock, paced to ``speed`` virtual seconds per wall second
+    (0: as fast as possible); the laser through :class:`LaserDevice`."""
+
+    time_unit = "virtual"
+    description = "simulated nodes"
+
+    def __init__(self, model: Model, world: World, options: Options) -> None:
+        self.backend = SimBackend(model, transition_delay=0.2, parameter_delay=0.05,
+                                  initial_parameters=NAV2_PARAMETERS)
+        self.manager = ModeManager(model, self.backend, **MANAGER_OPTIONS)
+        self.laser = LaserDevice(world, self.backend)
+        self.tick = options.tick
+        self.speed = options.speed
+
+    @property
+    def clock(self) -> Clock:
+        return self.backend.clock
+
+    def advance(self, seconds: float) -> None:
+        self.backend.clock.advance(seconds)
+        self.laser.update()
+        if self.speed > 0:
+            time.sleep(seconds / self.speed)
+
+    def break_laser(self) -> None:
+        self.laser.break_laser()
+
+    def repair_laser(self) -> None:
+        self.laser.repair()
+
+    def close(self) -> None:
+        pass  # nothing runs in the background; the manager stays readable after the run
+
+
+def ros_platform(model: Model, world: World, options: Options, say: Callable[[str], None]) -> Platform:
+    """The pilot's nodes as rclpy lifecycle nodes in a child process, managed over ROS 2 from here
+    (:class:`sm_bt.ros.demo_nodes.RosPlatform`; imported here: it needs the ros extra)."""
+    from sm_bt.ros.demo_nodes import RosPlatform
+
+    return RosPlatform(model, str(model.path), world, manager_options=MANAGER_OPTIONS,
+                       initial_parameters=NAV2_PARAMETERS, say=say)
 
 
 @dataclass
@@ -73,35 +180,75 @@ class Demo:
     def __init__(self, options: Options, console: Console | None = None) -> None:
         if options.tree not in TREES:
             raise ValueError(f"unknown tree {options.tree!r} (trees: {', '.join(TREES)})")
+        if options.ros and not options.speed > 0:
+            raise ValueError("--speed must be more than 0 with --ros (world seconds per wall second)")
         self.options = options
         self.console = console or terminal_console()
         self.model = load_model(bundled_model("pilot"))
-        self.backend = SimBackend(self.model, transition_delay=0.2, parameter_delay=0.05,
-                                  initial_parameters=NAV2_PARAMETERS)
-        self.clock = self.backend.clock
-        # One recovery attempt: a laser that fails again at once is then left to the tree.
-        self.manager = ModeManager(self.model, self.backend, request_timeout=10.0, grace_period=1.0,
-                                   recovery_attempts=1)
-        self.world = World()
-        self.laser = LaserDevice(self.world, self.backend)
-        self.root = TREES[options.tree](options.cycles)
-        self.tree = py_trees.trees.BehaviourTree(self.root)
-        self.snapshot = py_trees.visitors.SnapshotVisitor()
-        self.tree.add_visitor(self.snapshot)
-        self.tree.setup(manager=self.manager, world=self.world)
-        self.monitor = Monitor(self.manager, self.console)
-        self.story = Story()
-        self._statuses: dict[py_trees.behaviour.Behaviour, Status] = {}
-        self._key_moment = ""
-        self._shown_modes: set[str] = set()
-        self._battery_ok = True
-        self.manager.subscribe(self._narrate)
+        # On ROS the world runs --speed times faster than the manager's wall clock; on the
+        # simulated platform both run on the virtual clock, and --speed only paces it.
+        self.world = World(time_scale=options.speed if options.ros else 1.0)
+        self._started = 0.0  # the manager's clock when the run starts
+        self._wall_started = time.monotonic()
+        self._lock = threading.Lock()  # on ROS, manager events come from the clock's thread
+        self.platform: Platform = ros_platform(self.model, self.world, options, self.note) if options.ros \
+            else SimulatedPlatform(self.model, self.world, options)
+        try:
+            self.manager = self.platform.manager
+            self.clock = self.manager.clock
+            self.root = TREES[options.tree](options.cycles)
+            self.tree = py_trees.trees.BehaviourTree(self.root)
+            self.snapshot = py_trees.visitors.SnapshotVisitor()
+            self.tree.add_visitor(self.snapshot)
+            self.tree.setup(manager=self.manager, world=self.world)
+            self.monitor = Monitor(self.manager, self.console)
+            self.story = Story()
+            self.final_mode = ""
+            self._statuses: dict[py_trees.behaviour.Behaviour, Status] = {}
+            self._key_moment = ""
+            self._shown_modes: set[str] = set()
+            self._battery_ok = True
+            self._broken_at: float | None = None  # world time the laser broke
+            self._started = self.clock.now()
+            self._subscription = self.manager.subscribe(self._narrate)
+        except BaseException:
+            self.platform.close()
+            raise
+
+    def close(self) -> None:
+        """Stop narrating and release the platform (on ROS: the runtime and the node process)."""
+        self._subscription.cancel()
+        self.platform.close()
+
+    # -- time ----------------------------------------------------------------------------------
+
+    @property
+    def on_wall_clock(self) -> bool:
+        return self.platform.time_unit == "wall"
+
+    def elapsed(self, at: float | None = None) -> float:
+        """Seconds of the manager's clock since the run started (virtual, or wall on ROS)."""
+        return (self.clock.now() if at is None else at) - self._started
+
+    def world_now(self) -> float:
+        """World time since the run started: what the laser schedule and the limit are in."""
+        return self.world.world_seconds(self.elapsed())
+
+    def stamp(self) -> str:
+        if self.on_wall_clock:
+            return f"[{self.elapsed():6.2f} s wall |{self.world_now():7.1f} s world]"
+        return f"[{self.clock.now():7.2f} s]"
 
     # -- narrative -----------------------------------------------------------------------------
 
     def say(self, text: str, style: str = "") -> None:
         if not self.options.quiet:
-            self.console.print(f"[{self.clock.now():7.2f} s] {text}", style=style or None, markup=False)
+            self.console.print(f"{self.stamp()} {text}", style=style or None, markup=False)
+
+    def note(self, text: str) -> None:
+        """A line about setting the platform up (before the run's clock starts)."""
+        if not self.options.quiet:
+            self.console.print(f"[{time.monotonic() - self._wall_started:6.2f} s wall] {text}", markup=False)
 
     def _narrate(self, event: Event) -> None:
         request = event.request
@@ -128,9 +275,10 @@ class Demo:
         actual = event.actual
         if actual is None or actual.state is not State.ACTIVE or not actual.mode:
             return
-        if not self.story.modes or self.story.modes[-1][1] != actual.mode:
-            self.story.modes.append((event.time, actual.mode))
-            self._key_moment = actual.mode
+        with self._lock:
+            if not self.story.modes or self.story.modes[-1][1] != actual.mode:
+                self.story.modes.append((self.elapsed(event.time), actual.mode))
+                self._key_moment = actual.mode
 
     def _after_tick(self) -> None:
         """Tell what the tree did: waypoints, recharges, battery, contingencies."""
@@ -153,8 +301,9 @@ class Demo:
             self._battery_ok = battery_ok
             self.say("battery recovered" if battery_ok else f"battery low ({self.world.battery:.2f}): "
                      "contingency", "bold")
-        if self._key_moment:
+        with self._lock:
             mode, self._key_moment = self._key_moment, ""
+        if mode:
             self.say(f"== pilot is now active.{mode} ==", "bold")
             if mode not in self._shown_modes:  # the table and tree once per mode, to stay readable
                 self._shown_modes.add(mode)
@@ -164,57 +313,90 @@ class Demo:
         """The mode monitor and the part of the tree ticked last."""
         if self.options.quiet:
             return
-        self.monitor.print_table()
+        if self.on_wall_clock:  # the monitor's title would give the wall clock's raw (monotonic) time
+            self.console.print(render_rich(snapshot(self.manager), title=f"t = {self.elapsed():.2f} s wall, "
+                                                                         f"{self.world_now():.1f} s world"))
+        else:
+            self.monitor.print_table()
         self.console.print(py_trees.display.unicode_tree(
             self.root, show_only_visited=True, show_status=True, visited=self.snapshot.visited,
             previously_visited=self.snapshot.previously_visited), markup=False, highlight=False)
 
     # -- the run -------------------------------------------------------------------------------
 
+    def _repair_due(self, now: float) -> bool:
+        """Whether the laser is to be repaired by world time ``now`` (``Options.laser_repair_at``)."""
+        repair_at = self.options.laser_repair_at
+        if repair_at is None:
+            return False
+        if not isinstance(repair_at, Auto):
+            return repair_at <= now
+        if not self.options.ros:
+            return now >= REPAIR_AT
+        if self._broken_at is None:
+            return False
+        with self._lock:
+            last = self.story.modes[-1] if self.story.modes else None
+        if last is not None and last[1] == pilot.DEGRADED and \
+                now - self.world.world_seconds(last[0]) >= DEGRADED_FOR:
+            return True
+        return now >= self._broken_at + 25.0 + self.world.world_seconds(ROS_REPAIR_WALL_MARGIN)
+
     def _world_events(self, now: float) -> None:
         options = self.options
-        if options.laser_failure_at is not None and self.world.laser_ok and \
-                options.laser_failure_at <= now and (options.laser_repair_at is None or now < options.laser_repair_at):
+        if self._broken_at is None and options.laser_failure_at is not None and options.laser_failure_at <= now \
+                and not self._repair_due(now):
+            self._broken_at = now
             self.say("laser failure: all-zero scans; laser_resender deactivates itself "
                      "(on_deactivate ERROR -> errorprocessing -> unconfigured)", "bold")
-            self.laser.break_laser()
-        elif not self.world.laser_ok and options.laser_repair_at is not None and options.laser_repair_at <= now:
+            self.platform.break_laser()
+        elif not self.world.laser_ok and self._repair_due(now):
             self.say("laser repaired: scans healthy again", "bold")
-            self.laser.repair()
+            self.platform.repair_laser()
 
     def run(self) -> int:
-        self.say(f"MROS pilot mission ({self.options.tree} tree), {self.options.cycles} patrol cycle(s); "
-                 f"robot at {self.world.position}, battery {self.world.battery:.2f}")
+        """Run the mission to its end, tell the summary and release the platform; the exit code."""
+        try:
+            return self._run()
+        finally:
+            self.close()
+
+    def _run(self) -> int:
+        where = f" on {self.platform.description}" + \
+            (f", world time {self.world.time_scale:g}x the wall clock" if self.on_wall_clock else "")
         started = time.monotonic()
+        self._started = self.clock.now()
+        self.say(f"MROS pilot mission ({self.options.tree} tree){where}, {self.options.cycles} patrol cycle(s); "
+                 f"robot at {self.world.position}, battery {self.world.battery:.2f}")
         while self.root.status is not Status.SUCCESS and self.root.status is not Status.FAILURE:
-            now = self.clock.now()
+            now = self.world_now()
             if now > self.options.limit:
                 break
             self._world_events(now)
             self.tree.tick()
             self._after_tick()
-            self.clock.advance(self.options.tick)
-            self.laser.update()
-            if self.options.speed > 0:
-                time.sleep(self.options.tick / self.options.speed)
+            self.platform.advance(self.platform.tick)
         self.say(f"mission {self.root.status.value}")
+        self.final_mode = str(self.manager.actual(pilot.SYSTEM))
         self.show()
         return self.summary(time.monotonic() - started)
 
     def expected_mode(self) -> str:
-        options = self.options
-        broken = options.laser_failure_at is not None and options.laser_failure_at <= self.clock.now() and \
-            (options.laser_repair_at is None or options.laser_repair_at > self.clock.now())
-        return "active.f_degraded_mode" if broken else "active.f_normal_mode"
+        """Degraded while the laser is broken, normal otherwise."""
+        return f"active.{pilot.DEGRADED if not self.world.laser_ok else pilot.NORMAL}"
 
     def summary(self, wall: float) -> int:
         out = self.console
+        unit = " wall" if self.on_wall_clock else ""  # the manager's clock: the requests' times
         out.print()
         out.print("Summary", style="bold")
-        out.print(f"  mission {self.root.status.value} after {self.clock.now():.1f} s of virtual time "
-                  f"({wall:.1f} s wall); {self.world.odometer:.1f} m driven, {self.story.waypoints} waypoints, "
-                  f"{self.story.recharges} recharge(s)", markup=False)
-        modes = " -> ".join(f"{mode} ({at:.1f} s)" for at, mode in self.story.modes)
+        if self.on_wall_clock:
+            duration = f"{self.world_now():.1f} s of world time ({wall:.1f} s wall, world {self.world.time_scale:g}x)"
+        else:
+            duration = f"{self.clock.now():.1f} s of virtual time ({wall:.1f} s wall)"
+        out.print(f"  mission {self.root.status.value} after {duration}; {self.world.odometer:.1f} m driven, "
+                  f"{self.story.waypoints} waypoints, {self.story.recharges} recharge(s)", markup=False)
+        modes = " -> ".join(f"{mode} ({at:.1f} s{unit})" for at, mode in self.story.modes)
         out.print(f"  pilot modes: {modes}", markup=False)
         by_origin = {origin: [r for r in self.story.requests if r.origin is origin] for origin in Origin}
         for origin, requests in by_origin.items():
@@ -222,14 +404,14 @@ class Demo:
                 continue
             ok = [r for r in requests if r.succeeded]
             times = [r.elapsed for r in ok if r.elapsed is not None]
-            mean = f", confirmed in {sum(times) / len(times):.2f} s on average" if times else ""
+            mean = f", confirmed in {sum(times) / len(times):.2f} s{unit} on average" if times else ""
             out.print(f"  {origin.value} requests: {len(ok)} of {len(requests)} succeeded{mean}", markup=False)
             for request in requests:
                 if not request.succeeded:
                     out.print(f"    #{request.id} {request.description}: {request.reason}", markup=False)
         if self.story.gave_up:
             out.print(f"  recovery gave up on: {', '.join(self.story.gave_up)} (left to the tree)", markup=False)
-        final = str(self.manager.actual(pilot.SYSTEM))
+        final = self.final_mode or str(self.manager.actual(pilot.SYSTEM))
         expected = self.expected_mode()
         good = self.root.status is Status.SUCCESS and final == expected
         verdict = "as expected" if good else f"NOT as expected ({expected} and a successful mission wanted)"
@@ -241,13 +423,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tree", choices=sorted(TREES), default="pilot",
                         help="contingencies in the tree (pilot, default) or chosen by a metacontroller")
     parser.add_argument("--laser-failure-at", type=_time, default=15.0, metavar="SECONDS",
-                        help="virtual time the laser breaks; 'never' for no failure (default 15)")
-    parser.add_argument("--laser-repair-at", type=_time, default=40.0, metavar="SECONDS",
-                        help="virtual time the laser is repaired; 'never' to leave it broken (default 40)")
+                        help="world time the laser breaks; 'never' for no failure (default 15)")
+    parser.add_argument("--laser-repair-at", type=_time, default=Auto.AUTO, metavar="SECONDS",
+                        help=f"world time the laser is repaired; 'never' to leave it broken (default {REPAIR_AT:g}; "
+                             f"with --ros, once the pilot has been in degraded mode for {DEGRADED_FOR:g} s, as "
+                             "on simulated nodes: handling the failure takes real seconds there)")
     parser.add_argument("--cycles", type=positive_int, default=2, help="patrol cycles (default 2)")
     parser.add_argument("--speed", type=non_negative, default=25.0,
-                        help="virtual seconds per wall second; 0 runs as fast as possible (default 25)")
+                        help="world (virtual) seconds per wall second; 0 runs as fast as possible, "
+                             "simulated only (default 25)")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
+    parser.add_argument("--ros", action="store_true",
+                        help="run on real ROS 2 lifecycle nodes (python -m sm_bt.ros.sim_nodes pilot, started "
+                             "and stopped by the demo) with the manager on ROS 2, serving the system_modes "
+                             "interface meanwhile; mode changes take real time, the world runs --speed "
+                             "times faster; needs the ros extra")
+    parser.epilog = ("World time is the mission's: the robot's driving, recharging and the laser schedule. "
+                     "On simulated nodes it is the manager's virtual clock. With --ros the manager runs in "
+                     "real time (its mode changes, grace periods and timeouts take real seconds) while the "
+                     "world runs --speed times faster.")
 
 
 def _time(text: str) -> float | None:
@@ -258,5 +452,17 @@ def _time(text: str) -> float | None:
 
 def run(args: argparse.Namespace) -> int:
     options = Options(laser_failure_at=args.laser_failure_at, laser_repair_at=args.laser_repair_at,
-                      cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree)
-    return Demo(options).run()
+                      cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree, ros=args.ros)
+    if not options.ros:
+        return Demo(options).run()
+    from sm_bt.cli import PROG, CliError  # not at the top: sm_bt.cli imports this module
+    from sm_bt.ros.environment import RosUnavailable
+    from sm_bt.ros.node_process import NodesError  # needs no rclpy
+
+    if not options.speed > 0:
+        print(f"{PROG} demo: error: --speed must be more than 0 with --ros", file=sys.stderr)
+        return 2
+    try:
+        return Demo(options).run()
+    except (RosUnavailable, NodesError) as error:
+        raise CliError(str(error)) from None

@@ -194,11 +194,14 @@ class Monitor:
 
     The manager's callbacks run inside its lock, possibly in another thread, so they only mark
     the view dirty; the owner calls :meth:`refresh` (from its loop) to render, and only a change
-    of the rows renders anything. ``title`` is shown above the table with the clock time.
+    of the rows renders anything. ``title`` is shown above the table with the clock time, counted
+    from ``epoch`` (a wall clock's raw monotonic time means nothing to a reader: pass its start).
     """
 
-    def __init__(self, manager: ModeManager, output: Console | TextIO, *, title: str | None = None) -> None:
+    def __init__(self, manager: ModeManager, output: Console | TextIO, *, title: str | None = None,
+                 epoch: float = 0.0) -> None:
         self.manager = manager
+        self.epoch = epoch
         self.output = output
         self.title = title
         #: How many times the view was rendered (tables printed, live updates, JSON lines).
@@ -222,7 +225,7 @@ class Monitor:
 
     def table(self, rows: list[Row] | None = None) -> Table:
         """The current table (``rows`` if given), titled with the clock time."""
-        now = f"t = {self.manager.clock.now():.2f} s"
+        now = f"t = {self.manager.clock.now() - self.epoch:.2f} s"
         title = f"{self.title} at {now}" if self.title else now
         return render_rich(snapshot(self.manager) if rows is None else rows, title=title)
 
@@ -274,5 +277,5 @@ class Monitor:
             else:
                 self.output.print(self.table(rows))
         else:
-            self.output.write(json.dumps(to_json(rows, self.manager.clock.now())) + "\n")
+            self.output.write(json.dumps(to_json(rows, self.manager.clock.now() - self.epoch)) + "\n")
             self.output.flush()

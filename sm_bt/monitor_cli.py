@@ -1,9 +1,11 @@
 """``sm-bt monitor MODEL``: the mode monitor over a model's nodes, optionally driving requests.
 
-There is no ROS backend yet, so the model's nodes run on the embedded simulated backend, on a
-virtual clock paced by ``--speed``. Each ``--change`` is requested in turn and waited for; the
-table (or, with ``--json``, one JSON line) is shown whenever the parts change, at most once per
-virtual step: in place on a terminal, appended otherwise.
+By default the model's nodes run on the embedded simulated backend, on a virtual clock paced by
+``--speed``. With ``--ros`` the monitor watches live ROS 2 nodes instead: a manager on ROS
+(:class:`~sm_bt.ros.runtime.RosRuntime`, serving nothing, without rules or recovery) only observes
+them, in real time, and makes the ``--change`` requests if there are any. Each ``--change`` is
+requested in turn and waited for; the table (or, with ``--json``, one JSON line) is shown whenever
+the parts change, at most once per step: in place on a terminal, appended otherwise.
 """
 
 from __future__ import annotations
@@ -11,23 +13,27 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from contextlib import AbstractContextManager, nullcontext
+from collections.abc import Callable
+from contextlib import AbstractContextManager, ExitStack, nullcontext
 from dataclasses import dataclass
 
 from rich.console import Console
 
 from sm_bt import bundled
 from sm_bt.arguments import non_negative
-from sm_bt.engine.clock import VirtualClock
+from sm_bt.engine.clock import Clock
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
+from sm_bt.model.types import Model
 from sm_bt.monitor import Monitor, terminal_console
 from sm_bt.sim import SimBackend
 
 STEP = 0.1  # virtual seconds per clock advance: appended output changes at most this often
 LIVE_STEP = 0.02  # finer in place, where intermediate states (configuring, ...) cost no lines
 SETTLE = 1.0  # virtual seconds watched after the last request, without --duration
+DISCOVERY = 5.0  # --ros: wall seconds to wait for the model's nodes before the requests
+ROS_NODE_NAME = "sm_bt_monitor"  # not the reference manager's name: a manager may run alongside
 _EPSILON = 1e-9
 
 
@@ -63,60 +69,116 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="request a change, then wait for it (repeatable, in order): a mode name, or one "
                              f"of the lifecycle transitions {', '.join(REQUESTABLE_LABELS)}")
     parser.add_argument("--duration", type=non_negative, metavar="SECONDS",
-                        help="virtual seconds to watch in all (default: until the requests are done, plus 1)")
+                        help="seconds to watch in all, virtual (wall with --ros) (default: until the requests "
+                             "are done, plus 1)")
     parser.add_argument("--speed", type=non_negative, default=10.0,
-                        help="virtual seconds per wall second; 0 runs as fast as possible (default 10)")
+                        help="virtual seconds per wall second; 0 runs as fast as possible (default 10; "
+                             "simulated nodes only)")
+    parser.add_argument("--ros", action="store_true",
+                        help="watch the model's live ROS 2 nodes instead of simulated ones (in ROS_DOMAIN_ID); "
+                             "needs the ros extra")
     parser.add_argument("--json", action="store_true",
                         help="print JSON Lines snapshots on stdout instead of the table (one per change)")
     parser.add_argument("--once", action="store_true", help="print one table (or snapshot) at the end, and exit")
     parser.add_argument("--lenient", action="store_true",
                         help="accept what the reference implementation accepts where sm_bt is stricter")
-    parser.epilog = ("The nodes run on the embedded simulated backend. Watching live ROS nodes (--ros) "
-                     "comes with the ROS backend.")
+    parser.epilog = ("Without --ros the model's nodes run on the embedded simulated backend. With --ros a "
+                     f"manager on ROS 2 (node {ROS_NODE_NAME}; no services, no rules, no recovery) watches "
+                     f"the live nodes in real time, waits up to {DISCOVERY:g} s for them to show up, and makes "
+                     "the --change requests through their lifecycle and parameter services.")
 
 
 def run(args: argparse.Namespace) -> int:
-    from sm_bt.cli import PROG, _load_or_report  # not at the top: sm_bt.cli imports this module
+    from sm_bt.cli import _load_or_report  # not at the top: sm_bt.cli imports this module
 
     model = _load_or_report(args.model, strict=not args.lenient)
     if model is None:
         return 1
     for warning in model.warnings:
         print(warning, file=sys.stderr)
-    backend = SimBackend(model)
-    manager = ModeManager(model, backend)
-    monitor = Monitor(manager, sys.stdout if args.json else terminal_console(), title=args.model)
-    watch = _Watch(manager, backend.clock, monitor, speed=args.speed, show=not args.once)
-    failed = 0
+    advance: Callable[[float], None]
+    with ExitStack() as stack:
+        if args.ros:
+            manager = _ros_manager(model, stack)
+            if manager is None:
+                return 1
+            advance = time.sleep
+        else:
+            backend = SimBackend(model)
+            manager = ModeManager(model, backend)
+            stack.callback(manager.close)
+            advance = _paced(backend.clock.advance, args.speed)
+        monitor = Monitor(manager, sys.stdout if args.json else terminal_console(), title=args.model,
+                          epoch=manager.clock.now() if args.ros else 0.0)
+        stack.callback(monitor.close)
+        watch = _Watch(manager, manager.clock, advance, monitor, show=not args.once)
+        return _watch(args, model, watch, monitor)
+
+
+def _ros_manager(model: Model, stack: ExitStack) -> ModeManager | None:
+    """An observing manager on ROS 2, closed by ``stack``; ``None`` (said why) without ROS."""
+    from sm_bt.cli import PROG
+    from sm_bt.ros.environment import RosUnavailable, require_ros
+
     try:
-        with watch.view():
+        require_ros()
+        from sm_bt.ros.runtime import RosRuntime
+
+        runtime = RosRuntime(model, node_name=ROS_NODE_NAME, serve=False,
+                             manager_options={"rules": False, "recovery": False})
+    except (RosUnavailable, ImportError) as error:
+        print(f"{PROG}: error: {error}", file=sys.stderr)
+        return None
+    stack.callback(runtime.close)
+    return runtime.manager
+
+
+def _paced(advance: Callable[[float], None], speed: float) -> Callable[[float], None]:
+    """Advance a virtual clock, then sleep so that it runs ``speed`` times wall time (0: no sleep)."""
+
+    def step(seconds: float) -> None:
+        advance(seconds)
+        if speed > 0:
+            time.sleep(seconds / speed)
+
+    return step
+
+
+def _watch(args: argparse.Namespace, model: Model, watch: _Watch, monitor: Monitor) -> int:
+    from sm_bt.cli import PROG
+
+    manager = watch.manager
+    failed = 0
+    with watch.view():
+        watch.show()
+        deadline = None if args.duration is None else manager.clock.now() + args.duration
+        if args.ros:
+            missing = watch.discover([node.name for node in model.nodes], deadline)
+            if missing:
+                print(f"{PROG}: warning: not reachable after {DISCOVERY:g} s: {', '.join(missing)}",
+                      file=sys.stderr)
+        for change in args.change:
+            problem = watch.request(change, deadline)
+            if problem:
+                print(f"{PROG}: error: {problem}", file=sys.stderr)
+                failed += 1
+        watch.until(deadline if deadline is not None else manager.clock.now() + SETTLE)
+        if args.once:
+            monitor.print_table()
+        else:
             watch.show()
-            deadline = None if args.duration is None else manager.clock.now() + args.duration
-            for change in args.change:
-                problem = watch.request(change, deadline)
-                if problem:
-                    print(f"{PROG}: error: {problem}", file=sys.stderr)
-                    failed += 1
-            watch.until(deadline if deadline is not None else manager.clock.now() + SETTLE)
-            if args.once:
-                monitor.print_table()
-            else:
-                watch.show()
-    finally:
-        monitor.close()
-        manager.close()
     return 1 if failed else 0
 
 
 class _Watch:
-    """Advances the virtual clock in steps, pacing it to wall time and refreshing the view."""
+    """Lets time pass in steps (``advance``: a paced virtual clock, or real time) and refreshes the view."""
 
-    def __init__(self, manager: ModeManager, clock: VirtualClock, monitor: Monitor, *, speed: float,
+    def __init__(self, manager: ModeManager, clock: Clock, advance: Callable[[float], None], monitor: Monitor, *,
                  show: bool) -> None:
         self.manager = manager
         self.clock = clock
+        self.advance = advance
         self.monitor = monitor
-        self.speed = speed
         self.showing = show
         output = monitor.output
         self.in_place = show and isinstance(output, Console) and output.is_terminal
@@ -132,10 +194,20 @@ class _Watch:
 
     def step(self, end: float) -> None:
         seconds = min(self.step_size, end - self.clock.now())
-        self.clock.advance(seconds)
+        self.advance(max(seconds, 0.0))
         self.show()
-        if self.speed > 0:
-            time.sleep(seconds / self.speed)
+
+    def discover(self, nodes: list[str], deadline: float | None) -> list[str]:
+        """Wait up to :data:`DISCOVERY` s (and the deadline) until the manager reaches ``nodes``;
+        the ones it does not reach."""
+        end = self.clock.now() + DISCOVERY
+        if deadline is not None:
+            end = min(end, deadline)
+        while True:
+            missing = [node for node in nodes if not self.manager.observation(node).reachable]
+            if not missing or self.clock.now() >= end - _EPSILON:
+                return missing
+            self.step(end)
 
     def until(self, end: float) -> None:
         while self.clock.now() < end - _EPSILON:

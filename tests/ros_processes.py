@@ -9,12 +9,9 @@ in a background thread and waits on futures with events (never ``spin_until_futu
 
 from __future__ import annotations
 
+import atexit
 import contextlib
-import math
 import os
-import signal
-import subprocess
-import sys
 import threading
 import time
 import weakref
@@ -24,8 +21,8 @@ from typing import Any
 
 import pytest
 
-READY_TIMEOUT = 20.0
-STOP_GRACE = 3.0
+from sm_bt.ros.node_process import READY_TIMEOUT, NodesError, NodesProcess
+
 DISCOVERY_TIMEOUT = 10.0
 DISCOVERY_POLL = 0.02
 #: The first call after discovery takes about 0.1 s (the response path matches late).
@@ -33,97 +30,17 @@ FIRST_CALL_TIMEOUT = 2.0
 SHM = Path("/dev/shm")
 
 
-class NodeProcess:
-    """One ``sm_bt.ros.sim_nodes`` process: :meth:`start` waits for READY; output is captured."""
-
-    def __init__(self, model: str, *args: str, ready_timeout: float = READY_TIMEOUT) -> None:
-        self.command = [sys.executable, "-m", "sm_bt.ros.sim_nodes", model, *args]
-        self.ready_timeout = ready_timeout
-        self.process: subprocess.Popen[str] | None = None
-        self.names: list[str] = []
-        self._stdout: list[str] = []
-        self._stderr: list[str] = []
-        self.ready_after = math.nan
-
-    # -- life cycle of the process -----------------------------------------------------------------
+class NodeProcess(NodesProcess):
+    """A :class:`~sm_bt.ros.node_process.NodesProcess` that the session's shared-memory cleanup
+    knows about; a failed start is a test failure with the child's whole stderr."""
 
     def start(self) -> NodeProcess:
-        """Start the process and wait for its READY line (``AssertionError`` with its stderr otherwise)."""
-        self._stdout = []
-        self._stderr = []
-        self.names = []
-        self._ready = threading.Event()
-        self.started_at = time.monotonic()
         _processes.add(self)
-        self.process = subprocess.Popen(self.command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                        bufsize=1)
-        # Reader threads: a full pipe would block the child.
-        threading.Thread(target=self._read, args=(self.process.stdout, self._stdout, True), daemon=True).start()
-        threading.Thread(target=self._read, args=(self.process.stderr, self._stderr, False), daemon=True).start()
-        deadline = self.started_at + self.ready_timeout
-        while not self._ready.wait(0.05):
-            if self.process.poll() is not None or time.monotonic() > deadline:
-                how = (f"exited with {self.process.returncode}" if self.process.poll() is not None
-                       else f"not READY after {self.ready_timeout:.0f} s")
-                self.stop()
-                raise AssertionError(f"{' '.join(self.command[1:])}: {how}\nstderr:\n{self.stderr}")
-        self.ready_after = time.monotonic() - self.started_at
+        try:
+            super().start()
+        except NodesError as error:
+            raise AssertionError(str(error)) from None
         return self
-
-    def _read(self, stream: Any, lines: list[str], watch_ready: bool) -> None:
-        for line in stream:
-            lines.append(line.rstrip("\n"))
-            if watch_ready and line.startswith("READY "):
-                self.names = [name for name in line[len("READY "):].strip().split(",") if name]
-                self._ready.set()
-        stream.close()
-
-    def stop(self, grace: float = STOP_GRACE) -> int | None:
-        """SIGINT, wait up to ``grace`` s, then SIGKILL. Returns the exit code (negative: killed)."""
-        process = self.process
-        if process is None:
-            return None
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-            try:
-                process.wait(grace)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(5)
-        return process.returncode
-
-    def kill(self) -> None:
-        """SIGKILL now (a crash). Peers keep seeing its services for about 20 s (the DDS lease)."""
-        if self.process is not None and self.process.poll() is None:
-            self.process.kill()
-            self.process.wait(5)
-
-    def restart(self) -> None:
-        """Stop (SIGINT, then SIGKILL) and start again with the same arguments."""
-        self.stop()
-        self.start()
-
-    # -- what it said ---------------------------------------------------------------------------------
-
-    @property
-    def pid(self) -> int | None:
-        return None if self.process is None else self.process.pid
-
-    @property
-    def alive(self) -> bool:
-        return self.process is not None and self.process.poll() is None
-
-    @property
-    def returncode(self) -> int | None:
-        return None if self.process is None else self.process.poll()
-
-    @property
-    def stdout(self) -> str:
-        return "\n".join(self._stdout)
-
-    @property
-    def stderr(self) -> str:
-        return "\n".join(self._stderr)
 
 
 # -- Fast DDS shared-memory files ---------------------------------------------------------------------
@@ -138,11 +55,11 @@ def shm_files() -> set[Path]:
     return {path for pattern in _SHM_PATTERNS for path in SHM.glob(pattern)}
 
 
-def shm_files_in_use() -> set[Path]:
-    """Fast DDS files some process (of any run on this machine we can see) has mapped or open."""
+def shm_files_in_use(*, except_pid: int | None = None) -> set[Path]:
+    """Files in /dev/shm some process (of any run on this machine we can see) has mapped or open."""
     used: set[Path] = set()
     for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
+        if not entry.name.isdigit() or entry.name == str(except_pid):
             continue
         try:
             for line in (entry / "maps").read_text().splitlines():
@@ -166,12 +83,13 @@ _live_lock = threading.Lock()
 _processes: weakref.WeakSet[NodeProcess] = weakref.WeakSet()
 
 
-def remove_stale_shm_files() -> list[Path]:
+def remove_stale_shm_files(*, at_exit: bool = False) -> list[Path]:
     """Remove the Fast DDS files this session created that no process uses any more.
 
-    Fast DDS leaves them behind after kills (and some even after clean exits). Only called when none
-    of our processes and no test-side context is alive; files of parallel runs are still mapped by
-    their processes and are kept.
+    Fast DDS leaves them behind after kills (and some even after clean exits). Does nothing while
+    one of our processes or a test-side context is alive; files of parallel runs are still mapped by
+    their processes and are kept. This process keeps its own port files mapped until it exits, so
+    ``at_exit`` (the interpreter is ending) also removes those.
     """
     with _live_lock:
         if _live_contexts or any(process.alive for process in list(_processes)):
@@ -179,7 +97,7 @@ def remove_stale_shm_files() -> list[Path]:
     stale = shm_files() - SHM_AT_SESSION_START
     if not stale:
         return []
-    stale -= shm_files_in_use()
+    stale -= shm_files_in_use(except_pid=os.getpid() if at_exit else None)
     removed = []
     for path in sorted(stale):
         try:
@@ -189,6 +107,8 @@ def remove_stale_shm_files() -> list[Path]:
             pass
     return removed
 
+
+atexit.register(remove_stale_shm_files, at_exit=True)
 
 Starter = Callable[..., NodeProcess]
 

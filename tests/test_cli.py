@@ -100,8 +100,8 @@ def test_check_lenient_downgrades_undefined_part(capsys: pytest.CaptureFixture[s
     assert any(line.startswith(f"{LENIENT}:12: warning: ") and "ghost" in line for line in lines[1:])
 
 
-@pytest.mark.skipif(not bundled_names(), reason="no bundled models yet")
 def test_check_bundled_models_by_name(capsys: pytest.CaptureFixture[str]) -> None:
+    assert set(bundled_names()) >= {"pilot", "actuation"}
     for name in bundled_names():
         code, out, err = run(capsys, "check", name)
         assert code == 0, err
@@ -109,8 +109,6 @@ def test_check_bundled_models_by_name(capsys: pytest.CaptureFixture[str]) -> Non
 
 
 def test_check_pilot_by_name(capsys: pytest.CaptureFixture[str]) -> None:
-    if "pilot" not in bundled_names():
-        pytest.skip("bundled model 'pilot' not written yet")
     code, out, _ = run(capsys, "check", "pilot")
     assert code == 0
     assert out.startswith("pilot: ok (1 system, ")
@@ -220,8 +218,6 @@ def test_modes_lenient_prints_warnings_to_stderr(capsys: pytest.CaptureFixture[s
 
 
 def test_modes_bundled_pilot(capsys: pytest.CaptureFixture[str]) -> None:
-    if "pilot" not in bundled_names():
-        pytest.skip("bundled model 'pilot' not written yet")
     code, out, _ = run(capsys, "modes", "pilot")
     assert code == 0
     assert "system pilot" in out.splitlines()
@@ -260,8 +256,7 @@ def test_help_lists_every_command(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_console_script() -> None:
     script = Path(sys.executable).with_name("sm-bt")
-    if not script.exists():
-        pytest.skip(f"console script not installed next to {sys.executable}")
+    assert script.exists(), f"console script not installed next to {sys.executable}"
     ok = subprocess.run([str(script), "check", str(OK)], capture_output=True, text=True, timeout=60)
     assert ok.returncode == 0, ok.stderr
     assert ok.stdout.startswith(f"{OK}: ok (2 systems, 5 nodes)")

@@ -323,5 +323,5 @@ def test_cli_duration_too_short_fails(capsys: pytest.CaptureFixture[str]) -> Non
 def test_cli_help_mentions_ros_watching(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run_cli(capsys, "--help")
     assert code == 0
-    assert "--ros" in out and "ROS backend" in out
+    assert "--ros" in out and "live ROS 2 nodes" in out
     assert "--change" in out and "--json" in out and "--once" in out

@@ -93,9 +93,19 @@ def test_a_transition_the_node_refuses_fails_with_the_reason_and_the_node_keeps_
     backend.change_state("amcl", Transition.ACTIVATE, record)
     assert done.wait(5.0)
     assert not results[0].ok
-    assert "activate of amcl failed" in results[0].reason and "success=false" in results[0].reason
+    assert results[0].reason == "activate of amcl refused: not a transition of its state unconfigured " \
+                                "(available: configure, shutdown)"
     pilot.settle(pilot.manager.change_mode("amcl", "__DEFAULT__"))
     assert str(pilot.manager.actual("amcl")) == "active.__DEFAULT__"
+
+
+def test_a_transition_whose_callback_fails_fails_the_request_with_the_reason(pilot: RosHarness) -> None:
+    pilot.fail_next("amcl", Transition.CONFIGURE)
+    request = pilot.manager.change_state("amcl", "configure")
+    pilot.wait(lambda: request.done)
+    assert not request.succeeded
+    assert "configure of amcl failed: its on_configure callback did not succeed (node now unconfigured)" \
+        in request.reason, request.reason
 
 
 def test_a_rejected_parameter_set_fails_the_request_with_the_nodes_reason(pilot: RosHarness) -> None:

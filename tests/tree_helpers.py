@@ -115,3 +115,32 @@ class Probe(py_trees.behaviour.Behaviour):
 
     def terminate(self, new_status: Status) -> None:
         self.terminated.append(new_status)
+
+
+def assert_in_order(text: str, lines: Sequence[str]) -> None:
+    """Each of ``lines`` occurs in ``text``, in this order (a narrative's story)."""
+    position = 0
+    for line in lines:
+        found = text.find(line, position)
+        assert found >= 0, f"{line!r} missing after position {position}:\n{text}"
+        position = found + len(line)
+
+
+#: What the pilot demo tells, in order, on either backend: start-up, then each contingency with
+#: its confirmations.
+PILOT_DEMO_STORY = (
+    "change_state pilot configure succeeded",
+    "== pilot is now active.f_normal_mode ==",
+    "laser failure: all-zero scans",
+    "restore laser_resender to active.__DEFAULT__ started [recovery]",
+    "gave up restoring laser_resender",
+    "change_mode pilot f_degraded_mode succeeded",
+    "== pilot is now active.f_degraded_mode ==",
+    "laser repaired",
+    "== pilot is now active.f_normal_mode ==",
+    "battery low",
+    "== pilot is now active.f_energy_saving_mode ==",
+    "recharged: battery 1.00",
+    "mission SUCCESS",
+    "pilot ends in active.f_normal_mode; as expected",
+)

@@ -9,7 +9,7 @@
 #                         their C typesupport;
 #   cached      (~1 s)    build/wheels/<hash>/ holds the wheel: pip install --no-deps it;
 #   build       (~30-40 s) pip wheel --no-deps (scikit-build-core + the pinned Jazzy build wheels in
-#                         pip's isolated build env; needs gcc/g++, cmake >= 3.20 and the package index).
+#                         pip's isolated build env; needs gcc/g++ and the package index; cmake comes from PyPI when missing).
 # <hash> covers interfaces/system_modes_msgs (package.xml, CMakeLists.txt, pyproject.toml,
 # build-constraints.txt, msg/, srv/) and the venv's Python version (the wheel is cp3X-specific).
 # The build log goes to build/logs/system_modes_msgs-<hash>.log.
@@ -96,20 +96,12 @@ if [[ -z "$whl" ]]; then
   missing=()
   command -v cc >/dev/null 2>&1 || command -v gcc >/dev/null 2>&1 || missing+=("a C compiler (gcc)")
   command -v c++ >/dev/null 2>&1 || command -v g++ >/dev/null 2>&1 || missing+=("a C++ compiler (g++)")
-  if ! command -v cmake >/dev/null 2>&1; then
-    missing+=("cmake >= 3.20 (none on PATH)")
-  else
-    cmver="$(cmake --version 2>/dev/null | head -1 | sed -n 's/^cmake version \([0-9][0-9.]*\).*/\1/p')"
-    if [[ -z "$cmver" ]] || [[ "$(printf '%s\n' 3.20 "$cmver" | sort -V | head -1)" != 3.20 ]]; then
-      missing+=("cmake >= 3.20 (found '${cmver:-unknown}' at $(command -v cmake))")
-    fi
-  fi
-  command -v ninja >/dev/null 2>&1 || command -v make >/dev/null 2>&1 || missing+=("make or ninja")
+  # cmake >= 3.20 and ninja need not be installed: scikit-build-core then takes them from PyPI
+  # (pinned in build-constraints.txt). Verified with no usable cmake on PATH.
   if ((${#missing[@]})); then
     die "cannot build the system_modes_msgs wheel: missing build tools:" \
         "${missing[@]/#/- }" \
-        "Install them (Debian/Ubuntu: sudo apt-get install build-essential cmake; a newer cmake also" \
-        "comes from PyPI: python3 -m pip install --user cmake==3.31.10), then re-run: make .venv/.installed"
+        "Install them (Debian/Ubuntu: sudo apt-get install build-essential), then re-run: make .venv/.installed"
   fi
 
   log="$root/build/logs/system_modes_msgs-$hash.log"

@@ -52,7 +52,8 @@ class NavigateTo(_WorldBehaviour):
     """Drive to ``waypoint``.
 
     * ``initialise``: start measuring time (the manager's clock)
-    * ``update``: advance the robot by speed x elapsed time; RUNNING on the way (feedback:
+    * ``update``: advance the robot by speed x elapsed world time (the clock's, times the
+      world's ``time_scale``); RUNNING on the way (feedback:
       distance and speed, or why it is stopped), SUCCESS on arrival. Never FAILURE: a robot
       without laser or controller waits, as Nav2 does, for the mode to give them back.
 
@@ -97,7 +98,7 @@ class NavigateTo(_WorldBehaviour):
 
     def update(self) -> Status:
         now = self.manager.clock.now()
-        elapsed, self._last = now - self._last, now
+        elapsed, self._last = self.world.world_seconds(now - self._last), now
         speed, why = self.speed()
         if self.world.drive(self.waypoint, speed * elapsed):
             self.feedback_message = f"at {self.waypoint}"
@@ -109,7 +110,7 @@ class NavigateTo(_WorldBehaviour):
 
 
 class Recharge(_WorldBehaviour):
-    """Charge for ``duration`` seconds (the pilot's 10 s), then the battery is full.
+    """Charge for ``duration`` seconds of world time (the pilot's 10 s), then the battery is full.
 
     RUNNING while charging, SUCCESS when done.
     """
@@ -123,7 +124,7 @@ class Recharge(_WorldBehaviour):
         self._started = self.manager.clock.now()
 
     def update(self) -> Status:
-        elapsed = self.manager.clock.now() - self._started
+        elapsed = self.world.world_seconds(self.manager.clock.now() - self._started)
         if elapsed >= self.duration:
             self.world.recharge()
             self.feedback_message = "battery full"

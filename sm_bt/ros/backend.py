@@ -39,7 +39,7 @@ from typing import Any
 
 from lifecycle_msgs.msg import Transition as TransitionMsg
 from lifecycle_msgs.msg import TransitionEvent
-from lifecycle_msgs.srv import ChangeState, GetState
+from lifecycle_msgs.srv import ChangeState, GetAvailableTransitions, GetState
 from rcl_interfaces.msg import ParameterEvent
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParametersAtomically
 from rclpy.node import Node
@@ -88,6 +88,7 @@ class _Peer:
     set_parameters: Any
     get_parameters: Any
     list_parameters: Any
+    get_transitions: Any
     presence: _Presence = _Presence.ABSENT
     lifecycle: bool = True
     state: State = State.UNKNOWN
@@ -171,7 +172,7 @@ class RosBackend:
                 self._node.destroy_subscription(subscription)
             for peer in self._peers.values():
                 for client in (peer.change_state, peer.get_state, peer.set_parameters, peer.get_parameters,
-                               peer.list_parameters):
+                               peer.list_parameters, peer.get_transitions):
                     self._node.destroy_client(client)
             self._subscriptions.clear()
             self._peers.clear()
@@ -188,17 +189,36 @@ class RosBackend:
             return
         request = ChangeState.Request()
         request.transition = TransitionMsg(id=int(transition), label=transition.label)
+        with self._lock:
+            events_before = peer.events
+
+        def fail(reason: str) -> None:
+            self._dispatch(lambda: done(CallResult(False, reason)))
+
+        def explained(response: Any) -> None:
+            # A transition that ran publishes transition events; one refused in the node's state
+            # does not. The extra round trip gives events sent before the answer time to arrive.
+            with self._lock:
+                ran, state = peer.events != events_before, peer.state
+            if ran:
+                fail(f"{transition.label} of {node} failed: its on_{transition.label} callback did not succeed "
+                     f"(node now {state.label})")
+                return
+            available = sorted({item.transition.label for item in response.available_transitions})
+            fail(f"{transition.label} of {node} refused: not a transition of its state {state.label} "
+                 f"(available: {', '.join(available) or 'none'})")
 
         def answered(response: Any) -> None:
             if response.success:
                 self._dispatch(lambda: done(CallResult(True)))
-            else:
-                self._dispatch(lambda: done(CallResult(False, f"{transition.label} of {node} failed: the node "
-                                                              "answered success=false (refused in its state, "
-                                                              "or its callback failed)")))
+                return
+            self._call(peer, peer.get_transitions, GetAvailableTransitions.Request(), "get_available_transitions",
+                       self.acquire_timeout, explained,
+                       lambda reason: fail(f"{transition.label} of {node} failed: the node answered success=false"),
+                       busy=False)
 
         self._call(peer, peer.change_state, request, f"change_state {transition.label}", self.call_timeout,
-                   answered, lambda reason: self._dispatch(lambda: done(CallResult(False, reason))))
+                   answered, fail)
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         peer = self._peer(node)
@@ -463,6 +483,7 @@ class RosBackend:
             set_parameters=node.create_client(SetParametersAtomically, f"{fqn}/set_parameters_atomically"),
             get_parameters=node.create_client(GetParameters, f"{fqn}/get_parameters"),
             list_parameters=node.create_client(ListParameters, f"{fqn}/list_parameters"),
+            get_transitions=node.create_client(GetAvailableTransitions, f"{fqn}/get_available_transitions"),
         )
         self._subscriptions.append(node.create_subscription(
             TransitionEvent, f"{fqn}/transition_event", lambda message: self._on_transition_event(peer, message),

@@ -2,7 +2,9 @@
 
 The robot drives straight toward a waypoint at the speed it is given; the battery drains per
 metre as the pilot's battery simulator does (0.7 at start, -0.02 per metre, 1.0 after a
-recharge). The laser can break and be repaired; :class:`LaserDevice` makes the simulated
+recharge). World time can run faster than the clock that measures it (``time_scale``): the
+demo on real ROS nodes lets the mission run many times faster than the mode changes, which take
+real time. The laser can break and be repaired; :class:`LaserDevice` makes the simulated
 ``laser_resender`` node fail by itself while its scans are broken, as the real node does when it
 receives all-zero scans (deactivate -> on_deactivate ERROR -> errorprocessing -> unconfigured).
 """
@@ -34,7 +36,12 @@ PATROL = tuple(f"wp_{i}" for i in range(1, 8))
 
 @dataclass
 class World:
-    """Where the robot is, how much battery it has left and whether its laser works."""
+    """Where the robot is, how much battery it has left and whether its laser works.
+
+    ``time_scale`` is how many world seconds pass per second of the clock the actions measure
+    time with (the mode manager's): 1 on the simulated backend's virtual clock; more on a wall
+    clock, so that a mission of minutes takes seconds while mode changes stay real.
+    """
 
     waypoints: dict[str, Point] = field(default_factory=lambda: dict(PILOT_WAYPOINTS))
     position: Point = (0.0, 0.0)
@@ -42,6 +49,15 @@ class World:
     drain_per_metre: float = 0.02
     laser_ok: bool = True
     odometer: float = 0.0
+    time_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (self.time_scale > 0.0 and math.isfinite(self.time_scale)):
+            raise ValueError(f"time_scale must be a finite number > 0, not {self.time_scale!r}")
+
+    def world_seconds(self, clock_seconds: float) -> float:
+        """How much world time passes in ``clock_seconds`` of the manager's clock."""
+        return clock_seconds * self.time_scale
 
     def distance_to(self, waypoint: str) -> float:
         x, y = self.waypoints[waypoint]
