@@ -42,7 +42,7 @@ from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.loader import load_model
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart
-from sm_bt.monitor import Monitor, render_rich, snapshot, terminal_console
+from sm_bt.monitor import Monitor, terminal_console
 from sm_bt.sim import SimBackend
 from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
@@ -67,8 +67,8 @@ REPAIR_AT = 40.0
 #: (two grace periods and a recovery) takes about 2.3 s of real time, i.e. 2.3 x speed seconds of
 #: world time, and meanwhile the robot drives on, so the battery could run low in degraded mode.
 DEGRADED_FOR = 22.0
-#: ... and at the latest this many wall seconds (as world time) plus 25 s after the failure, in case
-#: the tree never switches to degraded mode.
+#: ... and at the latest REPAIR_AT - failure time (25 s by default) of world time plus this many wall
+#: seconds after the failure, in case the tree never switches to degraded mode.
 ROS_REPAIR_WALL_MARGIN = 5.0
 
 
@@ -201,7 +201,8 @@ class Demo:
             self.snapshot = py_trees.visitors.SnapshotVisitor()
             self.tree.add_visitor(self.snapshot)
             self.tree.setup(manager=self.manager, world=self.world)
-            self.monitor = Monitor(self.manager, self.console)
+            # Times from the start: a wall clock's raw (monotonic) reading means nothing to a reader.
+            self.monitor = Monitor(self.manager, self.console, epoch=self.clock.now())
             self.story = Story()
             self.final_mode = ""
             self._statuses: dict[py_trees.behaviour.Behaviour, Status] = {}
@@ -313,11 +314,7 @@ class Demo:
         """The mode monitor and the part of the tree ticked last."""
         if self.options.quiet:
             return
-        if self.on_wall_clock:  # the monitor's title would give the wall clock's raw (monotonic) time
-            self.console.print(render_rich(snapshot(self.manager), title=f"t = {self.elapsed():.2f} s wall, "
-                                                                         f"{self.world_now():.1f} s world"))
-        else:
-            self.monitor.print_table()
+        self.monitor.print_table()
         self.console.print(py_trees.display.unicode_tree(
             self.root, show_only_visited=True, show_status=True, visited=self.snapshot.visited,
             previously_visited=self.snapshot.previously_visited), markup=False, highlight=False)
@@ -340,7 +337,8 @@ class Demo:
         if last is not None and last[1] == pilot.DEGRADED and \
                 now - self.world.world_seconds(last[0]) >= DEGRADED_FOR:
             return True
-        return now >= self._broken_at + 25.0 + self.world.world_seconds(ROS_REPAIR_WALL_MARGIN)
+        broken_for = max(REPAIR_AT - (self.options.laser_failure_at or 0.0), 0.0)
+        return now >= self._broken_at + broken_for + self.world.world_seconds(ROS_REPAIR_WALL_MARGIN)
 
     def _world_events(self, now: float) -> None:
         options = self.options

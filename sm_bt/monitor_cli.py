@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
             stack.callback(manager.close)
             advance = _paced(backend.clock.advance, args.speed)
         monitor = Monitor(manager, sys.stdout if args.json else terminal_console(), title=args.model,
-                          epoch=manager.clock.now() if args.ros else 0.0)
+                          epoch=manager.clock.now())
         stack.callback(monitor.close)
         watch = _Watch(manager, manager.clock, advance, monitor, show=not args.once)
         return _watch(args, model, watch, monitor)

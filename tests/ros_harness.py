@@ -13,7 +13,7 @@ from typing import Any
 
 import py_trees
 from harness import MANAGER_OPTIONS, tick_loop, wait_loop
-from ros_processes import NodeProcess, call
+from ros_processes import NodeProcess
 from tree_helpers import Tick
 
 from sm_bt.engine.lifecycle import Transition
@@ -35,7 +35,6 @@ class RosHarness:
         self.runtime = RosRuntime(model, node_name="sm_bt_test_manager", manager_options=options,
                                   backend_options=BACKEND_OPTIONS)
         self.manager = self.runtime.manager
-        self._parameter_clients: dict[str, Any] = {}
         names = [node.name for node in model.nodes]
         self.wait(lambda: all(self.manager.observation(n).reachable for n in names), DISCOVERY_LIMIT)
 
@@ -55,16 +54,8 @@ class RosHarness:
 
     def set_parameter(self, node: str, name: str, value: ParamValue) -> None:
         """Set one parameter of ``node`` directly (not through the manager); it must be accepted."""
-        from rcl_interfaces.srv import SetParameters
-
-        from sm_bt.ros.parameters import to_parameters
-
-        client = self._parameter_clients.get(node)
-        if client is None:
-            client = self.runtime.node.create_client(SetParameters, f"/{node}/set_parameters")
-            self._parameter_clients[node] = client
-        response = call(client, SetParameters.Request(parameters=to_parameters({name: value})), timeout=3.0)
-        assert response.results[0].successful, f"{node} refused {name}={value!r}: {response.results[0].reason}"
+        result = self.runtime.set_parameters(node, {name: value})
+        assert result.ok, f"{node} refused {name}={value!r}: {result.reason}"
 
     def fail_next(self, node: str, transition: Transition) -> None:
         self.set_parameter(node, "sim.fail_next", transition.label)

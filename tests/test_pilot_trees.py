@@ -14,7 +14,7 @@ from sm_bt.model.types import Model
 from sm_bt.sim import SimBackend
 from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
-from sm_bt.trees.pilot_actions import NavigateTo
+from sm_bt.trees.pilot_actions import NavigateTo, Recharge
 
 TREES: dict[str, Callable[[int], py_trees.behaviour.Behaviour]] = {
     "pilot": lambda cycles: pilot.create_root(cycles),
@@ -38,13 +38,13 @@ def clean_blackboard() -> Iterator[None]:
 class Mission:
     """A pilot tree ticked every 0.1 s of virtual time against simulated nodes."""
 
-    def __init__(self, tree: str, cycles: int = 3, model: Model | None = None) -> None:
+    def __init__(self, tree: str, cycles: int = 3, model: Model | None = None, time_scale: float = 1.0) -> None:
         self.model = model or bundled("pilot")
         self.backend = SimBackend(self.model, transition_delay=0.2, parameter_delay=0.05)
         self.clock = self.backend.clock
         self.manager = ModeManager(self.model, self.backend, request_timeout=10.0, grace_period=1.0,
                                    recovery_attempts=1)
-        self.world = World()
+        self.world = World(time_scale=time_scale)
         self.laser = LaserDevice(self.world, self.backend)
         self.root = TREES[tree](cycles)
         self.tree = py_trees.trees.BehaviourTree(self.root)
@@ -189,3 +189,28 @@ def test_tree_setup_without_world_is_a_clear_error() -> None:
     tree = py_trees.trees.BehaviourTree(pilot.create_root())
     with pytest.raises(RuntimeError, match=r"no world; set the tree up with tree.setup\(manager=manager, world="):
         tree.setup(manager=ModeManager(model, backend))
+
+
+def test_a_faster_world_drives_and_recharges_in_less_clock_time() -> None:
+    # The ROS demo's world runs --speed times faster than the manager's wall clock.
+    def first_waypoint_and_recharge(scale: float) -> tuple[float, float]:
+        mission = Mission("pilot", cycles=1, time_scale=scale)
+        mission.until(lambda: mission.pilot == "active.f_normal_mode")
+        driven = mission.until(lambda: mission.world.odometer > 0 and "wp_1" not in mission.navigating_to())
+        mission.world.battery = 0.1  # low: the tree goes to recharge
+        mission.until(lambda: any(isinstance(b, Recharge) and b.status is Status.RUNNING
+                                  for b in mission.root.iterate()))
+        charging = mission.until(lambda: mission.world.battery == 1.0)
+        return driven, charging
+
+    slow_drive, slow_charge = first_waypoint_and_recharge(1.0)
+    fast_drive, fast_charge = first_waypoint_and_recharge(10.0)
+    assert fast_drive < slow_drive / 5
+    assert slow_charge == pytest.approx(10.0, abs=0.25)
+    assert fast_charge == pytest.approx(1.0, abs=0.25)
+
+
+@pytest.mark.parametrize("scale", [0.0, -1.0, float("inf"), float("nan")])
+def test_a_world_time_scale_must_be_a_finite_positive_number(scale: float) -> None:
+    with pytest.raises(ValueError, match="time_scale must be a finite number > 0"):
+        World(time_scale=scale)

@@ -63,7 +63,7 @@ class _Presence(enum.Enum):
 
 @dataclass(eq=False)
 class _Call:
-    """One request in flight on a node; ``finish`` is idempotent."""
+    """One request in flight on a node (finishing it twice is a no-op: see ``RosBackend._finish``)."""
 
     peer: _Peer
     label: str
@@ -140,10 +140,6 @@ class RosBackend:
     @property
     def clock(self) -> WallClock:
         return self._clock
-
-    @property
-    def node(self) -> Node:
-        return self._node
 
     # -- Backend protocol ---------------------------------------------------------------------------
 

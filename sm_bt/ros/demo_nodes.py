@@ -18,7 +18,6 @@ from contextlib import ExitStack, contextmanager
 from types import FrameType
 from typing import Any
 
-from sm_bt.engine.backend import CallResult
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.ros.environment import prepare, require_ros
@@ -124,21 +123,11 @@ class RosPlatform:
             time.sleep(0.02)
 
     def set_parameters(self, node: str, values: Mapping[str, ParamValue]) -> None:
-        """Set parameters of ``node`` directly (not as a mode), through the manager's backend; they must
-        be accepted, within the backend's call timeout."""
-        done = threading.Event()
-        results: list[CallResult] = []
-
-        def finished(result: CallResult) -> None:
-            results.append(result)
-            done.set()
-
-        self.runtime.backend.set_parameters(node, values, finished)
+        """Set parameters of ``node`` directly (not as a mode); they must be accepted."""
         # The backend answers within its call timeout; the margin only guards against a bug.
-        if not done.wait(CALL_TIMEOUT + 2.0):
-            raise NodesError(f"set_parameters on {node}: no answer within {CALL_TIMEOUT + 2.0:.0f} s")
-        if not results[0].ok:
-            raise NodesError(results[0].reason)
+        result = self.runtime.set_parameters(node, values, timeout=CALL_TIMEOUT + 2.0)
+        if not result.ok:
+            raise NodesError(result.reason)
 
     # -- the Platform protocol ----------------------------------------------------------------------
 

@@ -56,7 +56,8 @@ class ModeManagerServer:
         self._node = node
         self._manager = manager
         self._log = node.get_logger()
-        self._entities: list[Any] = []
+        self._services: list[Any] = []
+        self._publishers: list[Any] = []
         self._mode_events: dict[str, Any] = {}
         self._transition_events: dict[str, Any] = {}
         self._mode_requests: dict[str, Any] = {}
@@ -76,12 +77,12 @@ class ModeManagerServer:
         if self._subscription is not None:
             self._subscription.cancel()
             self._subscription = None
-        for entity in self._entities:
-            if hasattr(entity, "srv_type"):
-                self._node.destroy_service(entity)
-            else:
-                self._node.destroy_publisher(entity)
-        self._entities.clear()
+        for service in self._services:
+            self._node.destroy_service(service)
+        for publisher in self._publishers:
+            self._node.destroy_publisher(publisher)
+        self._services.clear()
+        self._publishers.clear()
 
     # -- set-up --------------------------------------------------------------------------------------
 
@@ -90,11 +91,11 @@ class ModeManagerServer:
         node = self._node
 
         def service(kind: Any, name: str, callback: Any) -> None:
-            self._entities.append(node.create_service(kind, f"{base}/{name}", callback))
+            self._services.append(node.create_service(kind, f"{base}/{name}", callback))
 
         def publisher(kind: Any, name: str) -> Any:
             created = node.create_publisher(kind, f"{base}/{name}", LATCHED)
-            self._entities.append(created)
+            self._publishers.append(created)
             return created
 
         service(ChangeMode, "change_mode", lambda req, res: self._change_mode(part, req, res))

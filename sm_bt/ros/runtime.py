@@ -21,9 +21,10 @@ from collections.abc import Mapping
 from types import TracebackType
 from typing import Any
 
+from sm_bt.engine.backend import CallResult
 from sm_bt.engine.clock import WallClock
 from sm_bt.engine.manager import ModeManager
-from sm_bt.model.types import Model
+from sm_bt.model.types import Model, ParamValue
 from sm_bt.ros.environment import prepare, require_ros
 
 #: The reference manager's node name.
@@ -67,6 +68,22 @@ class RosRuntime:
         self.manager = ModeManager(model, self.backend, **dict(manager_options or {}))
         self.server = ModeManagerServer(self.node, self.manager) if serve else None
         self._closed = False
+
+    def set_parameters(self, node: str, values: Mapping[str, ParamValue], timeout: float = 10.0) -> CallResult:
+        """Set parameters of ``node`` directly, not as a mode (for tools, tests, fault injection);
+        blocks until the node answers (at most the backend's call timeout, bounded by
+        ``timeout``): not for a tick or a callback."""
+        done = threading.Event()
+        results: list[CallResult] = []
+
+        def finished(result: CallResult) -> None:
+            results.append(result)
+            done.set()
+
+        self.backend.set_parameters(node, values, finished)
+        if not done.wait(timeout):
+            return CallResult(False, f"set_parameters on {node}: no answer within {timeout:g} s")
+        return results[0]
 
     def _spin(self) -> None:
         from rclpy.executors import ExternalShutdownException

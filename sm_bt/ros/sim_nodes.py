@@ -75,12 +75,6 @@ _OUTCOMES = {"failure": TransitionCallbackReturn.FAILURE, "error": TransitionCal
 _RCLError: Any = rclpy_implementation.RCLError
 
 
-def _untyped(value: object) -> Any:
-    """``value`` as ``Any``: for rclpy methods without annotations, which typed code may not call
-    directly under ``mypy --strict``; keeps ``Any`` to the call site."""
-    return value
-
-
 def split_name(part: str) -> tuple[str, str]:
     """``(namespace, name)`` of a model part name: ``"left/gripper"`` -> ``("/left", "gripper")``."""
     namespace, _, name = part.strip("/").rpartition("/")
@@ -138,7 +132,8 @@ class SimulatedNode(LifecycleNode):
         namespace, name = split_name(part.name)
         super().__init__(name, namespace=namespace, context=context)
         self.part = part
-        self._log = _untyped(self.get_logger)()
+        # Inherited unannotated rclpy methods, called on the subclass: outside untyped_calls_exclude.
+        self._log = self.get_logger()  # type: ignore[no-untyped-call]
         # True while the node runs a deactivate it started itself (sim.broken): not a requested
         # transition, so sim.fail_next does not apply and on_deactivate reports the error.
         self._failing = False
@@ -156,7 +151,7 @@ class SimulatedNode(LifecycleNode):
         self.add_post_set_parameters_callback(self._parameters_set)
         # Idle unless broken: a timer per node ticking all the time would load the executor.
         self._broken_timer = self.create_timer(BROKEN_CHECK_PERIOD, self._fail_if_broken)
-        _untyped(self._broken_timer.cancel)()
+        self._broken_timer.cancel()
         self._guard_change_state()
 
     @property
@@ -206,7 +201,7 @@ class SimulatedNode(LifecycleNode):
         if planned is None or planned[0] != label:
             return _SUCCESS
         # Consumed through the parameter itself, so that clients read "" and see a parameter event.
-        self.set_parameters([_untyped(Parameter)(FAIL_NEXT, value="")])
+        self.set_parameters([Parameter(FAIL_NEXT, value="")])
         self._log.info(f"{FAIL_NEXT}: {label} returns {planned[1].to_label()}")
         return planned[1]
 
@@ -232,9 +227,9 @@ class SimulatedNode(LifecycleNode):
             if parameter.name == BROKEN:
                 # reset() also wakes the executor's wait, so the first check comes within a period.
                 if parameter.value:
-                    _untyped(self._broken_timer.reset)()
+                    self._broken_timer.reset()
                 else:
-                    _untyped(self._broken_timer.cancel)()
+                    self._broken_timer.cancel()
 
     def _fail_if_broken(self) -> None:
         # A timer of the node, never a service or parameter callback: the failure is the node's own
@@ -244,7 +239,7 @@ class SimulatedNode(LifecycleNode):
         self._log.warning(f"{BROKEN}: failing by itself (deactivate -> error -> unconfigured)")
         self._failing = True
         try:
-            _untyped(self.trigger_deactivate)()
+            self.trigger_deactivate()  # type: ignore[no-untyped-call]
         except _RCLError as error:  # the state changed under us; the next tick checks again
             self._log.warning(f"{BROKEN}: could not deactivate: {error}")
         finally:
@@ -367,7 +362,7 @@ def run_nodes(
         if spinner is not None:
             spinner.join(timeout=3.0)
         for node in nodes:
-            _untyped(node.destroy_node)()
+            node.destroy_node()  # type: ignore[no-untyped-call]
         context.try_shutdown()
     if failure:
         raise RuntimeError("the executor stopped with an error") from failure[0]
