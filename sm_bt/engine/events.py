@@ -7,6 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sm_bt.engine.inference import Actual
+from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import StateMode
 
@@ -50,6 +51,15 @@ class EventKind(str, enum.Enum):
 
 @dataclass(frozen=True)
 class Event:
+    """One thing the manager tells its observers.
+
+    ``actual`` is the part's inferred actual when the event was made. ``previous`` is, for an
+    ``ACTUAL`` event, the actual before the change; for a ``TARGET`` event, the part's actual just
+    before its target changed (the state a change starts from). ``transition`` (``TARGET`` events)
+    is the lifecycle transition asked of the part: the one requested by ``change_state``, or the
+    first step from ``previous`` towards the new target's state; ``None`` when the state stays.
+    """
+
     kind: EventKind
     part: str
     time: float
@@ -58,6 +68,8 @@ class Event:
     target: StateMode | None = None
     divergence: Divergence | None = None
     request: Request | None = None
+    previous: Actual | None = None
+    transition: Transition | None = None
 
 
 Observer = Callable[[Event], None]

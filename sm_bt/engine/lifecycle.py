@@ -189,3 +189,15 @@ def plan(start: State, goal: State) -> tuple[Step, ...]:
                 queue.append(step.goal)
     raise PlanError(f"no lifecycle path from {start.label} to {goal.label}"
                     + (" (a finalized node must be restarted)" if start is State.FINALIZED else ""))
+
+
+def first_transition(start: State, goal: State) -> Transition | None:
+    """The first requestable transition from ``start`` towards ``goal``; ``None`` when they are
+    equal, either is not a primary state, or no path exists."""
+    if start is goal or not (start.is_primary and goal.is_primary):
+        return None
+    try:
+        steps = plan(start, goal)
+    except PlanError:
+        return None
+    return steps[0].transition if steps else None

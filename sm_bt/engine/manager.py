@@ -19,7 +19,14 @@ from sm_bt.engine.backend import Backend, CallResult, Done, NodeReport
 from sm_bt.engine.clock import TimerHandle
 from sm_bt.engine.events import Cause, Divergence, Event, EventKind, Observer, Subscription
 from sm_bt.engine.inference import Actual, Changes, Inference, NodeObservation
-from sm_bt.engine.lifecycle import REQUESTABLE, PlanError, Transition, step_for, transition_by_label
+from sm_bt.engine.lifecycle import (
+    REQUESTABLE,
+    PlanError,
+    Transition,
+    first_transition,
+    step_for,
+    transition_by_label,
+)
 from sm_bt.engine.requests import Execution, Job, NodeJob, Origin, Parallel, Request, Sequence
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue, SystemPart
@@ -137,8 +144,11 @@ class ModeManager:
 
     def change_mode(self, part: str, mode: str, *, timeout: float | None = None) -> Request:
         """Ask for ``part`` (system or node) to be active in ``mode``. Returns at once."""
+        if not mode:
+            raise ValueError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
+                             "for the default mode)")
         with self._entry():
-            return self._request(part, StateMode(State.ACTIVE, mode or None), f"change_mode {part} {mode}", timeout)
+            return self._request(part, StateMode(State.ACTIVE, mode), f"change_mode {part} {mode}", timeout)
 
     def change_state(self, part: str, transition: Transition | str | int, *,
                      timeout: float | None = None) -> Request:
@@ -161,7 +171,7 @@ class ModeManager:
             except (PlanError, ValueError) as error:
                 return self._refuse(part, description, str(error))
             mode = self._mode_for_activation(part) if goal is State.ACTIVE else None
-            return self._start(part, StateMode(goal, mode), description, Origin.USER, timeout)
+            return self._start(part, StateMode(goal, mode), description, Origin.USER, timeout, resolved)
 
     def change_to(self, part: str, target: StateMode | str, *, timeout: float | None = None) -> Request:
         """Ask for ``part`` to reach ``target`` (``"active.FAST"``, ``"inactive"``, a
@@ -256,7 +266,7 @@ class ModeManager:
     # -- request execution ---------------------------------------------------------------------
 
     def _start(self, part: str, target: StateMode, description: str, origin: Origin,
-               timeout: float | None) -> Request:
+               timeout: float | None, transition: Transition | None = None) -> Request:
         now = self.clock.now()
         request = Request(part, target, description, origin, now, withdraw=self._withdraw)
         log.info("-> request #%d %s [%s]", request.id, description, origin.value)
@@ -264,7 +274,7 @@ class ModeManager:
         for execution in list(self._executions.values()):
             if execution.scope & scope or execution.request.part == part:
                 self._finish(execution, False, f"preempted by request #{request.id} ({description})")
-        previous = self._assign_targets(part, target)
+        previous = self._assign_targets(part, target, transition)
         if origin is Origin.USER:
             for node in scope:
                 self._attempts.pop(node, None)
@@ -301,13 +311,14 @@ class ModeManager:
             stages = [[self._plan(p, StateMode(target.state)) for p in stage] for stage in reversed(default_stages)]
         return Sequence([Parallel(jobs) for jobs in stages if jobs])
 
-    def _assign_targets(self, part: str, target: StateMode) -> dict[str, StateMode | None]:
+    def _assign_targets(self, part: str, target: StateMode,
+                        transition: Transition | None = None) -> dict[str, StateMode | None]:
         """Set the target of ``part`` and, top-down, of every part its target implies."""
         previous: dict[str, StateMode | None] = {}
 
         def assign(name: str, value: StateMode) -> None:
             previous.setdefault(name, self._inference.target(name))
-            self._set_target(name, value)
+            self._set_target(name, value, transition if name == part else None)
             spec = self.model.parts[name]
             if isinstance(spec, SystemPart):
                 if value.state is State.ACTIVE:
@@ -333,13 +344,16 @@ class ModeManager:
             for child in spec.parts:
                 yield from self._nodes_targeted(child, StateMode(target.state))
 
-    def _set_target(self, part: str, target: StateMode | None) -> None:
+    def _set_target(self, part: str, target: StateMode | None, transition: Transition | None = None) -> None:
         if target is not None and target.mode is not None:
             self._last_mode[part] = target.mode
         if self._inference.target(part) == target:
             return
+        before = self._inference.actual(part)
+        if transition is None and target is not None:
+            transition = first_transition(before.state, target.state)
+        self._emit(EventKind.TARGET, part, f"target {target}", target=target, previous=before, transition=transition)
         self._apply(self._inference.set_target(part, target))
-        self._emit(EventKind.TARGET, part, f"target {target}", target=target)
 
     def _finish(self, execution: Execution, succeeded: bool, reason: str) -> None:
         request = execution.request
@@ -561,14 +575,16 @@ class ModeManager:
                     log.exception("observer %r failed on %s", subscription.callback, event.kind.value)
 
     def _emit(self, kind: EventKind, part: str, message: str, *, target: StateMode | None = None,
-              divergence: Divergence | None = None, request: Request | None = None) -> None:
+              divergence: Divergence | None = None, request: Request | None = None,
+              previous: Actual | None = None, transition: Transition | None = None) -> None:
         actual = self._inference.actual(part) if part in self.model.parts else None
         self._events.append(Event(kind, part, self.clock.now(), message, actual=actual, target=target,
-                                  divergence=divergence, request=request))
+                                  divergence=divergence, request=request, previous=previous,
+                                  transition=transition))
 
     def _apply(self, changes: Changes) -> None:
         for part, (old, new) in changes.items():
-            self._emit(EventKind.ACTUAL, part, f"{part}: {old} -> {new}")
+            self._emit(EventKind.ACTUAL, part, f"{part}: {old} -> {new}", previous=old)
 
     def _unsubscribe(self, subscription: Subscription) -> None:
         with self._lock:
