@@ -114,7 +114,7 @@ def _hang_activate(rig: Rig) -> None:
                  "controller_server: configure failed: configure of controller_server failed: "
                  "on_configure returned FAILURE", 0.1, id="refused-transition"),
     pytest.param({"pilot": "f_performance_mode", "controller_server": "FAST"}, _hang_activate, 0.5,
-                 "timed out after 0.5 s (controller_server: activate)", 0.5, id="timeout"),
+                 "timed out after 0.5 s (controller_server hung in activating for 0.44 s)", 0.5, id="timeout"),
 ])
 def test_change_mode_fails_with_the_managers_reason(part: str, mode: dict[str, str], fault: Fault,
                                                     timeout: float | None, reason: str, failed_at: float) -> None:
@@ -233,7 +233,7 @@ def test_a_transition_invalid_from_the_current_state_fails_with_the_reason(part:
     change = ChangeState("Activate", part, "activate")
     trace = tick_until_done(build(change, rig), rig)
     assert [t.status for t in trace] == [Status.FAILURE]
-    assert change.feedback_message == ("transition activate is not valid in state unconfigured "
+    assert change.feedback_message == (f"{part}: transition activate is not valid in state unconfigured "
                                        "(valid: configure, shutdown)")
     assert backend_requests(rig) == []
     assert rig.manager.requests() == []

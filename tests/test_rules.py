@@ -91,15 +91,19 @@ def test_recovery_is_bounded_then_the_node_is_failed() -> None:
     assert len(rig.kinds(EventKind.FAILED)) == 1  # reported once, no further attempts
 
 
-def test_restarted_node_is_restored() -> None:
+def test_a_vanished_node_is_reported_not_restored_until_it_comes_back() -> None:
     rig = Rig(bundled("actuation"), grace_period=0.5, recovery_attempts=2, vanish_after=0.5)
     assert rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE")).succeeded
     rig.backend.crash("manipulator")
-    rig.until(lambda: rig.manager.failed() == ["manipulator"], limit=20.0)
+    rig.run(5.0)
     assert rig.manager.actual("manipulator").state is State.UNKNOWN
+    divergence = rig.manager.divergence("manipulator")
+    assert divergence is not None and divergence.is_error and "no answer" in divergence.reason
+    # Nothing to restore while it is gone: no attempt is spent on it.
+    assert not [e for e in rig.kinds(EventKind.REQUEST) if e.request and e.request.origin is Origin.RECOVERY]
     rig.backend.restart("manipulator")
     rig.until(lambda: rig.state("actuation") == "active.PERFORMANCE", limit=10.0)
-    assert rig.manager.failed() == []
+    assert rig.manager.failed() == [] and rig.manager.divergences() == []
 
 
 def test_a_users_direct_change_is_not_fought() -> None:

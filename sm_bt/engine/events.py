@@ -23,13 +23,18 @@ class Cause(str, enum.Enum):
 
 @dataclass(frozen=True)
 class Divergence:
-    """A part whose actual state/mode is not its target, since ``since`` (clock seconds)."""
+    """A part whose actual state/mode is not its target, since ``since`` (clock seconds).
+
+    ``reason`` explains it in words: what is off, or, once recovery gave up on the part, why it
+    gave up (``"gave up after 3 attempts: laser_resender hung in activating for 30 s"``).
+    """
 
     part: str
     target: StateMode
     actual: Actual
     since: float
     cause: Cause
+    reason: str = ""
 
     @property
     def is_error(self) -> bool:
@@ -37,7 +42,8 @@ class Divergence:
         return self.cause in (Cause.FAULT, Cause.OVERRIDE)
 
     def __str__(self) -> str:
-        return f"{self.part}: target {self.target}, actual {self.actual} ({self.cause.value})"
+        why = f": {self.reason}" if self.reason else ""
+        return f"{self.part}: target {self.target}, actual {self.actual} ({self.cause.value}{why})"
 
 
 class EventKind(str, enum.Enum):

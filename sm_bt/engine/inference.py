@@ -12,9 +12,10 @@ it, and returns only the parts whose result changed.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
+from sm_bt.engine.hierarchy import Hierarchy
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model, NodePart, ParamValue, SystemPart
 
@@ -175,15 +176,13 @@ def _infer_untargeted(part: SystemPart, actual_of: Callable[[str], Actual], actu
 class Inference:
     """Keeps node observations and targets, and the inferred actual of every part up to date."""
 
-    def __init__(self, model: Model) -> None:
+    def __init__(self, model: Model, hierarchy: Hierarchy | None = None) -> None:
         self.model = model
+        self._hierarchy = hierarchy if hierarchy is not None else Hierarchy.of(model)
         self._observations = {node.name: NodeObservation() for node in model.nodes}
         self._targets: dict[str, StateMode] = {}
         self._actual: dict[str, Actual] = {}
-        # Bottom-up order of every part, and of the systems above each part.
-        self._order = sorted(model.parts, key=model.height)
-        self._above = {name: model.ancestors(name) for name in model.parts}
-        for name in self._order:
+        for name in self._hierarchy.bottom_up:
             self._actual[name] = self._compute(name)
 
     # -- queries -----------------------------------------------------------------------------
@@ -204,40 +203,36 @@ class Inference:
             self._targets.pop(part, None)
         else:
             self._targets[part] = target
-        return self._recompute([part])
+        return self._recompute(part)
 
     def node_appeared(self, node: str, state: State, parameters: Mapping[str, ParamValue],
                       lifecycle: bool = True) -> Changes:
         self._observations[node] = NodeObservation(True, state, dict(parameters), lifecycle)
-        return self._recompute([node])
+        return self._recompute(node)
 
     def node_state(self, node: str, state: State) -> Changes:
         obs = self._observations[node]
         obs.seen, obs.state, obs.gone = True, state, ""
-        return self._recompute([node])
+        return self._recompute(node)
 
     def node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> Changes:
         self._observations[node].parameters.update(changed)
-        return self._recompute([node])
+        return self._recompute(node)
 
     def node_vanished(self, node: str, reason: str) -> Changes:
         obs = self._observations[node]
         obs.gone = reason or "vanished"
-        return self._recompute([node])
+        return self._recompute(node)
 
-    def _recompute(self, parts: Iterable[str]) -> Changes:
-        dirty: set[str] = set()
-        for part in parts:
-            dirty.add(part)
-            dirty.update(self._above[part])
+    def _recompute(self, part: str) -> Changes:
+        """``part`` and the systems above it, bottom-up (nothing else can have changed)."""
         changes: Changes = {}
-        for name in self._order:
-            if name in dirty:
-                new = self._compute(name)
-                old = self._actual[name]
-                if new != old:
-                    self._actual[name] = new
-                    changes[name] = (old, new)
+        for name in (part, *self._hierarchy.ancestors[part]):
+            new = self._compute(name)
+            old = self._actual[name]
+            if new != old:
+                self._actual[name] = new
+                changes[name] = (old, new)
         return changes
 
     def _compute(self, name: str) -> Actual:

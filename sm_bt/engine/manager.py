@@ -1,23 +1,45 @@
 """The embedded mode manager: targets top-down, inference bottom-up, rules and recovery.
 
 ``ModeManager(model, backend)`` owns the targets of every part, keeps inference up to date from
-what the backend reports, executes requests (``change_mode``/``change_state``) as confirmed,
-ordered plans, and reacts to divergences: after a grace period, rules first (bottom-up), then a
-bounded number of attempts to restore the target. Nothing here blocks; time comes from the
-backend's clock, and every entry point is serialised by one re-entrant lock, so reports may
-arrive from any thread.
+what the backend reports, carries requests (``change_mode``/``change_state``/``change_to``) out as
+confirmed, ordered plans, and reacts to divergences: after a grace period, rules first
+(bottom-up), then restoring nodes, within a budget.
+
+How requests interact (the semantics the README states):
+
+* **The last request wins.** A request preempts every request in flight that drives one of the
+  same nodes (or asks for the same part): those end FAILURE "preempted by request #N (...)".
+  The new one starts from where the nodes are heading: a call already in flight on a node is
+  never contradicted; its node's driver waits for the outcome and goes on from there.
+* A request ends SUCCESS once every node reached its goal and the part's inferred actual is the
+  target; FAILURE with the reason (naming the node and why) as soon as one step cannot be
+  taken, a node that reached its goal leaves it again, or ``timeout`` runs out.
+* A request that is refused (unknown part or mode, a transition invalid where the part is or is
+  heading) changes nothing and is done at once.
+
+Nothing here blocks; time comes from the backend's clock. Every entry point is serialised by
+one re-entrant lock, so reports may arrive from any thread; the outermost entry then *settles*:
+it works through the agenda (plans handing over to their next steps), re-examines the
+divergences that changed and reacts to faults, until nothing is left to do, and only then tells
+the observers. The work per event is proportional to what the event changed.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Iterable, Iterator, Mapping
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import replace
 
 from sm_bt.engine.backend import Backend, CallResult, Done, NodeReport
 from sm_bt.engine.clock import TimerHandle
-from sm_bt.engine.events import Cause, Divergence, Event, EventKind, Observer, Subscription
+from sm_bt.engine.divergences import Divergences
+from sm_bt.engine.drivers import NodeDriver
+from sm_bt.engine.events import Divergence, Event, EventKind, Observer, Subscription
+from sm_bt.engine.executions import Execution
+from sm_bt.engine.hierarchy import Hierarchy, implied_targets
 from sm_bt.engine.inference import Actual, Changes, Inference, NodeObservation
 from sm_bt.engine.lifecycle import (
     REQUESTABLE,
@@ -27,27 +49,29 @@ from sm_bt.engine.lifecycle import (
     step_for,
     transition_by_label,
 )
-from sm_bt.engine.requests import Execution, Job, NodeJob, Origin, Parallel, Request, Sequence
+from sm_bt.engine.reactions import FireRule, GiveUp, Reactions, Restore
+from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue, SystemPart
+from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue
 
 log = logging.getLogger("sm_bt.manager")
 
-#: Clock slack: a timer set for ``since + grace`` must find the grace period over when it fires.
-_EPSILON = 1e-6
 #: The primary state each requestable transition leads to.
 _GOAL = {step.transition: step.goal for step in REQUESTABLE}
+#: Settling passes before the manager reports that it could not settle (a bug, not a model).
+_MAX_PASSES = 100_000
 
 
 class ModeManager:
     """Manage the parts of ``model`` through ``backend``.
 
-    ``request_timeout`` bounds every request (seconds of the backend's clock), ``grace_period``
+    ``request_timeout`` bounds every request (seconds of the backend's clock); ``grace_period``
     is how long a divergence must last, with no request working on it, before rules or recovery
-    act, and ``recovery_attempts`` bounds how often a node is restored within ``recovery_window``
-    seconds before it is reported as failed (a node that comes back and fails again at once
-    still runs out of attempts; one that stays up for the window has them all again).
-    ``rules=False``/``recovery=False`` switch those reactions off.
+    act. Rules and recovery share a budget per part: ``recovery_attempts`` reactions in a run of
+    failures; it is whole again once the part stayed on target for ``recovery_window`` seconds
+    (a node that comes back and fails again at once still runs out). After that the part is
+    *given up* and its divergence says why. ``rules=False``/``recovery=False`` switch those
+    reactions off.
     """
 
     def __init__(self, model: Model, backend: Backend, *, request_timeout: float = 30.0,
@@ -57,25 +81,19 @@ class ModeManager:
         self.backend = backend
         self.clock = backend.clock
         self.request_timeout = request_timeout
-        self.grace_period = grace_period
-        self.recovery_attempts = recovery_attempts
-        self.recovery_window = recovery_window
-        self.rules_enabled = rules
-        self.recovery_enabled = recovery
         self._lock = threading.RLock()
-        self._inference = Inference(model)
-        # The hierarchy never changes: walk it once, not on every node report.
-        self._below = {name: frozenset(model.nodes_under(name)) for name in model.parts}
-        self._above = {name: model.ancestors(name) for name in model.parts}
-        self._bottom_up = sorted(model.parts, key=model.height)
+        self._hierarchy = Hierarchy.of(model)
+        self._inference = Inference(model, self._hierarchy)
+        self._divergences = Divergences(model, self._hierarchy, self._inference, grace_period)
+        self._reactions = Reactions(model, self._hierarchy, attempts=recovery_attempts, window=recovery_window,
+                                    rules=rules, recovery=recovery)
+        self._drivers = {node.name: NodeDriver(node.name, _DriverIO(self)) for node in model.nodes}
         self._executions: dict[int, Execution] = {}
-        self._divergences: dict[str, Divergence] = {}
-        self._since: dict[str, float] = {}
-        self._attempts: dict[str, list[float]] = {}  # when recovery last restored each node
-        self._failed: set[str] = set()
+        self._confirming: dict[str, set[Execution]] = {}  # part -> executions waiting for its actual
         self._last_mode: dict[str, str] = {}  # the last active mode asked for, kept over deactivation
+        self._agenda: deque[Callable[[], None]] = deque()
+        self._outbox = _Outbox()
         self._subscriptions: list[Subscription] = []
-        self._events: list[Event] = []
         self._depth = 0
         self._grace_timer: TimerHandle | None = None
         self._grace_due: float | None = None
@@ -83,7 +101,29 @@ class ModeManager:
         with self._entry():
             backend.attach([node.name for node in model.nodes], _Listener(self))
 
-    # -- queries -------------------------------------------------------------------------------
+    # -- settings ---------------------------------------------------------------------------------
+
+    @property
+    def grace_period(self) -> float:
+        return self._divergences.grace_period
+
+    @property
+    def recovery_attempts(self) -> int:
+        return self._reactions.attempts
+
+    @property
+    def recovery_window(self) -> float:
+        return self._reactions.window
+
+    @property
+    def rules_enabled(self) -> bool:
+        return self._reactions.rules_enabled
+
+    @property
+    def recovery_enabled(self) -> bool:
+        return self._reactions.recovery_enabled
+
+    # -- queries ----------------------------------------------------------------------------------
 
     @property
     def lock(self) -> threading.RLock:
@@ -107,12 +147,13 @@ class ModeManager:
         """Parts whose actual differs from their target, bottom-up. ``errors_only`` keeps those
         beyond the grace period that no request explains."""
         with self._lock:
-            found = list(self._divergences.values())
+            height = self._hierarchy.height
+            found = sorted(self._divergences.records.values(), key=lambda d: height[d.part])
         return [d for d in found if d.is_error] if errors_only else found
 
     def divergence(self, part: str) -> Divergence | None:
         with self._lock:
-            return self._divergences.get(part)
+            return self._divergences.records.get(part)
 
     def available_modes(self, part: str) -> list[str]:
         """Every mode of ``part``, sorted byte-wise (as the reference's ``get_available_modes``)."""
@@ -126,9 +167,10 @@ class ModeManager:
                     if self._reachable(part, StateMode(State.ACTIVE, m))]
 
     def failed(self) -> list[str]:
-        """Nodes that recovery gave up on (they stay so until they reach a target again)."""
+        """Parts that rules and recovery gave up on (until they are back on target, or a user
+        request or a restart of the node makes their budget whole again)."""
         with self._lock:
-            return sorted(self._failed)
+            return sorted(self._reactions.gave_up)
 
     def requests(self) -> list[Request]:
         """Requests in progress."""
@@ -140,10 +182,11 @@ class ModeManager:
         with self._lock:
             return self._inference.observation(node)
 
-    # -- commands ------------------------------------------------------------------------------
+    # -- commands ---------------------------------------------------------------------------------
 
     def change_mode(self, part: str, mode: str, *, timeout: float | None = None) -> Request:
-        """Ask for ``part`` (system or node) to be active in ``mode``. Returns at once."""
+        """Ask for ``part`` (system or node) to be active in ``mode`` (``__DEFAULT__`` names its
+        default mode). Returns at once. ``ValueError`` for an empty mode name."""
         if not mode:
             raise ValueError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
                              "for the default mode)")
@@ -153,23 +196,26 @@ class ModeManager:
     def change_state(self, part: str, transition: Transition | str | int, *,
                      timeout: float | None = None) -> Request:
         """Ask for a lifecycle transition of ``part`` (system or node): ``"configure"``,
-        ``"activate"``, ``Transition.DEACTIVATE``, ... Returns at once. A part already in the
-        transition's goal state succeeds at once."""
+        ``"activate"``, ``Transition.DEACTIVATE``, ... Returns at once. The transition must be
+        valid where the part is, or where a request in flight is taking it; a part already in
+        the transition's goal state succeeds at once. Activation keeps the last mode asked for."""
         with self._entry():
             name = transition.label if isinstance(transition, Transition) else str(transition)
             description = f"change_state {part} {name}"
             if part not in self.model.parts:
                 return self._refuse(part, description, self._unknown_part(part))
             current = self._inference.actual(part).state
+            heading = self._heading(part)
             try:
                 resolved = self._resolve_transition(transition, current)
                 if resolved not in _GOAL:
                     raise PlanError(f"{resolved.label} ({int(resolved)}) cannot be requested")
                 goal = _GOAL[resolved]
-                if current.is_primary and current is not goal:
+                valid_ahead = heading is not None and _valid(heading, resolved)
+                if current.is_primary and goal not in (current, heading) and not valid_ahead:
                     step_for(current, resolved)  # raises with the valid ones when invalid here
             except (PlanError, ValueError) as error:
-                return self._refuse(part, description, str(error))
+                return self._refuse(part, description, f"{part}: {error}")
             mode = self._mode_for_activation(part) if goal is State.ACTIVE else None
             return self._start(part, StateMode(goal, mode), description, Origin.USER, timeout, resolved)
 
@@ -188,25 +234,12 @@ class ModeManager:
                                     "(unconfigured, inactive or active)")
             return self._request(part, wanted, description, timeout)
 
-    def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None) -> Request:
-        """Start a user request for ``wanted`` (an active mode resolved: ``None``/``__DEFAULT__``
-        is the default mode), or refuse it with the part's real names."""
-        if part not in self.model.parts:
-            return self._refuse(part, description, self._unknown_part(part))
-        if wanted.state is State.ACTIVE:
-            resolved = self._resolve_mode(part, wanted.mode or "")
-            if resolved is None:
-                modes = ", ".join(self.available_modes(part))
-                return self._refuse(part, description, f"unknown mode {wanted.mode!r} of {part} (modes: {modes})")
-            wanted = StateMode(State.ACTIVE, resolved)
-        return self._start(part, wanted, description, Origin.USER, timeout)
-
     def subscribe(self, callback: Observer, part: str | Iterable[str] | None = None,
                   kinds: Iterable[EventKind] | None = None) -> Subscription:
         """Call ``callback(event)`` for events of ``part`` (one, several, or all) and ``kinds``.
 
-        Callbacks run inside the manager's lock, in the thread that caused the event; they may
-        call the manager. Cancel with ``subscription.cancel()``.
+        Callbacks run inside the manager's lock, in the thread that caused the event, after the
+        manager settled; they may call the manager. Cancel with ``subscription.cancel()``.
         """
         parts = None if part is None else frozenset([part] if isinstance(part, str) else part)
         for name in parts or ():
@@ -221,41 +254,55 @@ class ModeManager:
         """Stop: cancel requests in flight and timers, detach from the backend."""
         with self._entry():
             for execution in list(self._executions.values()):
-                self._finish(execution, False, "manager closed")
+                self.finish(execution, False, "manager closed")
             if self._grace_timer is not None:
                 self._grace_timer.cancel()
             self._closed = True
             self.backend.detach()
 
-    # -- node reports (from the backend) -------------------------------------------------------
+    # -- node reports (from the backend) ----------------------------------------------------------
 
     def _node_appeared(self, node: str, report: NodeReport) -> None:
         with self._entry():
-            self._failed.discard(node)
-            self._attempts.pop(node, None)
+            log.info("node %s appeared: %s%s", node, report.state.label,
+                     "" if report.lifecycle else " (parameters only)")
+            self._reactions.reset([node])
+            self._drivers[node].node_appeared()
             self._apply(self._inference.node_appeared(node, report.state, report.parameters, report.lifecycle))
+            self._drivers[node].advance()
 
     def _node_state(self, node: str, state: State) -> None:
         with self._entry():
             self._apply(self._inference.node_state(node, state))
+            self._drivers[node].advance()
 
     def _node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> None:
         with self._entry():
             self._apply(self._inference.node_parameters(node, changed))
+            self._drivers[node].advance()
 
     def _node_vanished(self, node: str, reason: str) -> None:
         with self._entry():
+            log.warning("node %s vanished: %s", node, reason)
             self._apply(self._inference.node_vanished(node, reason))
+            self._drivers[node].advance()
 
-    # -- calls to nodes (for jobs) --------------------------------------------------------------
+    # -- what drivers need ------------------------------------------------------------------------
+
+    def driver(self, node: str) -> NodeDriver:
+        return self._drivers[node]
 
     def _send_transition(self, node: str, transition: Transition, done: Done) -> None:
-        log.info("  %s: %s", node, transition.label)
+        log.debug("  %s: %s", node, transition.label)
         self.backend.change_state(node, transition, self._serialised(done))
 
     def _send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
-        log.info("  %s: set %d parameters", node, len(parameters))
+        log.debug("  %s: set %d parameters", node, len(parameters))
         self.backend.set_parameters(node, parameters, self._serialised(done))
+
+    def _parameters_accepted(self, node: str, parameters: Mapping[str, ParamValue]) -> None:
+        # The answer already says what the node holds; its parameter events may come later.
+        self._apply(self._inference.node_parameters(node, parameters))
 
     def _serialised(self, done: Done) -> Done:
         def callback(result: CallResult) -> None:
@@ -263,86 +310,61 @@ class ModeManager:
                 done(result)
         return callback
 
-    # -- request execution ---------------------------------------------------------------------
+    # -- executions -------------------------------------------------------------------------------
+
+    def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None) -> Request:
+        """Start a user request for ``wanted`` (an active mode resolved: ``__DEFAULT__`` is the
+        default mode), or refuse it with the part's real names."""
+        if part not in self.model.parts:
+            return self._refuse(part, description, self._unknown_part(part))
+        if wanted.state is State.ACTIVE:
+            resolved = self._resolve_mode(part, wanted.mode or DEFAULT_MODE)
+            if resolved is None:
+                modes = ", ".join(self.available_modes(part))
+                return self._refuse(part, description, f"unknown mode {wanted.mode!r} of {part} (modes: {modes})")
+            wanted = StateMode(State.ACTIVE, resolved)
+        return self._start(part, wanted, description, Origin.USER, timeout)
 
     def _start(self, part: str, target: StateMode, description: str, origin: Origin,
                timeout: float | None, transition: Transition | None = None) -> Request:
-        now = self.clock.now()
-        request = Request(part, target, description, origin, now, withdraw=self._withdraw)
-        log.info("-> request #%d %s [%s]", request.id, description, origin.value)
-        scope = frozenset(self._nodes_targeted(part, target))
+        request = Request(part, target, description, origin, self.clock.now(), withdraw=self._withdraw)
+        log.info("request #%d %s started [%s]", request.id, description, origin.value)
+        implied = implied_targets(self.model, part, target)
+        scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
         for execution in list(self._executions.values()):
             if execution.scope & scope or execution.request.part == part:
-                self._finish(execution, False, f"preempted by request #{request.id} ({description})")
-        previous = self._assign_targets(part, target, transition)
+                self.finish(execution, False, f"preempted by request #{request.id} ({description})")
+        previous = self._assign_targets(implied, origin, transition)
         if origin is Origin.USER:
-            for node in scope:
-                self._attempts.pop(node, None)
-                self._failed.discard(node)
-        self._restart_grace(scope)
-        # A part already in the target needs no step: its plan finishes in the first pump.
-        job = self._plan(part, target)
-        execution = Execution(request, job, scope, previous)
+            self._reactions.reset(previous)
+        execution = Execution(self, request, scope, previous)
+        request._progress = lambda: self._locked(execution.feedback)
         self._executions[request.id] = execution
+        self._divergences.busy(scope, +1)
         limit = self.request_timeout if timeout is None else timeout
-        execution.timer = self.clock.call_later(limit, lambda: self._timed_out(request.id, limit))
+        execution.timer = self.clock.call_later(limit, lambda: self._timed_out(execution, limit))
         self._emit(EventKind.REQUEST, part, f"#{request.id} {description} started", request=request)
+        execution.start()
         return request
 
     def _refuse(self, part: str, description: str, reason: str) -> Request:
         now = self.clock.now()
         request = Request(part, StateMode(State.UNKNOWN), description, Origin.USER, now)
-        log.error("request %s refused: %s", description, reason)
+        log.warning("request %s refused: %s", description, reason)
         request._finish(False, reason, now)
         return request
 
-    def _plan(self, part: str, target: StateMode) -> Job:
-        spec = self.model.parts[part]
-        if isinstance(spec, NodePart):
-            mode = spec.modes.get(target.mode or spec.default_mode) if target.state is State.ACTIVE else None
-            return NodeJob(_JobIO(self), part, target, mode)
-        if target.state is State.ACTIVE:
-            system_mode = spec.modes[target.mode or spec.default_mode]
-            stages = [[self._plan(p, e.target) for p in stage
-                       if (e := system_mode.entries[p]).target is not None] for stage in system_mode.stages]
-        else:
-            # Going down: tear down in the reverse of the default mode's bring-up order.
-            default_stages = spec.modes[spec.default_mode].stages
-            stages = [[self._plan(p, StateMode(target.state)) for p in stage] for stage in reversed(default_stages)]
-        return Sequence([Parallel(jobs) for jobs in stages if jobs])
-
-    def _assign_targets(self, part: str, target: StateMode,
-                        transition: Transition | None = None) -> dict[str, StateMode | None]:
-        """Set the target of ``part`` and, top-down, of every part its target implies."""
-        previous: dict[str, StateMode | None] = {}
-
-        def assign(name: str, value: StateMode) -> None:
-            previous.setdefault(name, self._inference.target(name))
-            self._set_target(name, value, transition if name == part else None)
-            spec = self.model.parts[name]
-            if isinstance(spec, SystemPart):
-                if value.state is State.ACTIVE:
-                    for entry in spec.modes[value.mode or spec.default_mode].entries.values():
-                        if entry.target is not None:
-                            assign(entry.part, entry.target)
-                else:
-                    for child in spec.parts:
-                        assign(child, StateMode(value.state))
-
-        assign(part, target)
+    def _assign_targets(self, implied: list[tuple[str, StateMode]], origin: Origin,
+                        transition: Transition | None) -> dict[str, tuple[StateMode | None, bool]]:
+        """Set the targets (the requested part first, then top-down below it); return what they
+        were, with whether a rule had set them."""
+        previous: dict[str, tuple[StateMode | None, bool]] = {}
+        for index, (name, value) in enumerate(implied):
+            previous[name] = (self._inference.target(name), self._divergences.is_retargeted(name))
+            self._set_target(name, value, transition if index == 0 else None)
+            if index > 0 or origin is not Origin.RECOVERY:  # restoring a node keeps who chose its target
+                self._divergences.retargeted(name, index == 0 and origin is Origin.RULE)
         return previous
-
-    def _nodes_targeted(self, part: str, target: StateMode) -> Iterator[str]:
-        spec = self.model.parts[part]
-        if isinstance(spec, NodePart):
-            yield part
-        elif target.state is State.ACTIVE:
-            for entry in spec.modes[target.mode or spec.default_mode].entries.values():
-                if entry.target is not None:
-                    yield from self._nodes_targeted(entry.part, entry.target)
-        else:
-            for child in spec.parts:
-                yield from self._nodes_targeted(child, StateMode(target.state))
 
     def _set_target(self, part: str, target: StateMode | None, transition: Transition | None = None) -> None:
         if target is not None and target.mode is not None:
@@ -353,192 +375,113 @@ class ModeManager:
         if transition is None and target is not None:
             transition = first_transition(before.state, target.state)
         self._emit(EventKind.TARGET, part, f"target {target}", target=target, previous=before, transition=transition)
+        self._divergences.touch(part)
         self._apply(self._inference.set_target(part, target))
 
-    def _finish(self, execution: Execution, succeeded: bool, reason: str) -> None:
+    def confirm(self, execution: Execution) -> None:
+        """The plan is done: succeed once the part's actual is the target."""
+        request = execution.request
+        actual = self._inference.actual(request.part)
+        if actual.known and actual.state_mode == request.target:
+            self.finish(execution, True, "")
+        else:
+            self._confirming.setdefault(request.part, set()).add(execution)
+
+    def finish(self, execution: Execution, succeeded: bool, reason: str) -> None:
+        if not execution.active:
+            return
+        execution.stop()
         request = execution.request
         self._executions.pop(request.id, None)
-        execution.job.cancel()
-        if execution.timer is not None:
-            execution.timer.cancel()
+        waiting = self._confirming.get(request.part)
+        if waiting is not None:
+            waiting.discard(execution)
+        self._divergences.busy(execution.scope, -1)
         now = self.clock.now()
-        request._finish(succeeded, reason, now)
-        self._restart_grace(execution.scope)
+        if request.origin is not Origin.USER:
+            self._reactions.finished(request.part, succeeded, reason)
         outcome = f"succeeded in {now - request.created:.2f} s" if succeeded else f"failed: {reason}"
-        (log.info if succeeded else log.warning)("<- request #%d %s %s", request.id, request.description, outcome)
+        (log.info if succeeded else log.warning)("request #%d %s %s", request.id, request.description, outcome)
         self._emit(EventKind.REQUEST, request.part, f"#{request.id} {request.description} {outcome}",
                    request=request)
+        request._finish(succeeded, reason, now)
 
     def _withdraw(self, request: Request) -> None:
         with self._entry():
             execution = self._executions.get(request.id)
             if execution is None:
                 return
-            for part, target in execution.previous_targets.items():
+            for part, (target, by_rule) in execution.previous_targets.items():
                 self._set_target(part, target)
-            self._finish(execution, False, "cancelled")
+                self._divergences.retargeted(part, by_rule)
+            self.finish(execution, False, "cancelled")
 
-    def _timed_out(self, request_id: int, limit: float) -> None:
+    def _timed_out(self, execution: Execution, limit: float) -> None:
         with self._entry():
-            execution = self._executions.get(request_id)
-            if execution is not None:
-                self._finish(execution, False, f"timed out after {limit:g} s ({execution.request.feedback})")
+            if execution.active:
+                self.finish(execution, False, f"timed out after {limit:g} s ({execution.stall()})")
 
-    def _pump(self) -> None:
-        for execution in list(self._executions.values()):
-            if execution.request.id not in self._executions:
-                continue  # finished by an earlier one's side effects
-            job, request = execution.job, execution.request
-            job.pump()
-            if job.failure:
-                self._finish(execution, False, job.failure)
-                continue
-            actual = self._inference.actual(request.part)
-            if job.finished and actual.known and actual.state_mode == request.target:
-                self._finish(execution, True, "")
-            elif job.finished:
-                request.feedback = f"confirming: {request.part} is {actual}, waiting for {request.target}"
-            else:
-                request.feedback = job.feedback()
+    def later(self, action: Callable[[], None]) -> None:
+        self._agenda.append(action)
 
-    # -- divergences, rules, recovery ----------------------------------------------------------
-
-    def _restart_grace(self, nodes: Iterable[str]) -> None:
-        for node in nodes:
-            self._since.pop(node, None)
-            for above in self._above[node]:
-                self._since.pop(above, None)
-
-    def _evaluate(self) -> list[Divergence]:
-        """Recompute the divergences, emit their changes, and return those that are faults."""
-        now = self.clock.now()
-        busy = self._busy_nodes()
-        found: dict[str, Divergence] = {}
-        for part in self._bottom_up:
-            target = self._inference.target(part)
-            actual = self._inference.actual(part)
-            if target is None or (actual.known and actual.state_mode == target):
-                self._since.pop(part, None)
-                continue
-            since = self._since.setdefault(part, now)
-            nodes = self._below[part]
-            if busy & nodes:
-                cause = Cause.IN_FLIGHT
-            elif now - since < self.grace_period - _EPSILON:
-                cause = Cause.GRACE
-            elif any(self._node_off_target(n) for n in nodes):
-                cause = Cause.FAULT
-            else:
-                cause = Cause.OVERRIDE
-            found[part] = Divergence(part, target, actual, since, cause)
-        for part in self._divergences:
-            if part not in found:
-                self._failed.discard(part)
-                self._emit(EventKind.DIVERGENCE, part, f"{part} is back on target {self._inference.target(part)}")
-        for part, new in found.items():
-            old_divergence = self._divergences.get(part)
-            if old_divergence is None or (old_divergence.cause, old_divergence.actual) != (new.cause, new.actual):
-                if new.is_error and (old_divergence is None or not old_divergence.is_error):
-                    log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s).",
-                                part, new.target, new.actual, new.cause.value)
-                self._emit(EventKind.DIVERGENCE, part, str(new), divergence=new)
-        self._divergences = found
-        self._schedule_grace([d for d in found.values() if d.cause is Cause.GRACE])
-        return [d for d in found.values() if d.cause is Cause.FAULT]
-
-    def _node_off_target(self, node: str) -> bool:
-        target = self._inference.target(node)
-        actual = self._inference.actual(node)
-        return target is not None and not (actual.known and actual.state_mode == target)
-
-    def _schedule_grace(self, waiting: list[Divergence]) -> None:
-        if not waiting:
-            return
-        due = min(d.since for d in waiting) + self.grace_period
-        if self._grace_due is not None and self._grace_due <= due:
-            return
-        if self._grace_timer is not None:
-            self._grace_timer.cancel()
-        self._grace_due = due
-        self._grace_timer = self.clock.call_later(due - self.clock.now(), self._grace_over)
-
-    def _grace_over(self) -> None:
-        with self._entry():
-            self._grace_timer = None
-            self._grace_due = None
+    # -- reactions --------------------------------------------------------------------------------
 
     def _react(self, faults: list[Divergence]) -> None:
-        """Rules bottom-up (nodes, then sub-systems, then systems); then restore what no rule covers."""
-        fired: set[str] = set()
-        if self.rules_enabled:
-            for divergence in faults:  # already bottom-up
-                owner = divergence.part
-                if any(owner in self._above[f] for f in fired):
-                    continue  # a lower rule is already correcting this
-                for rule in self.model.parts[owner].rules:
-                    condition = self._inference.actual(rule.if_part)
-                    if rule.if_target == divergence.target and condition.known \
-                            and condition.state_mode == rule.if_part_state:
-                        log.info("applying rule %s of %s: %s is %s -> %s", rule.name, owner, rule.if_part,
-                                 rule.if_part_state, rule.new_target)
-                        self._emit(EventKind.RULE, owner,
-                                   f"rule {rule.name}: {rule.if_part} is {rule.if_part_state} -> {rule.new_target}")
-                        self._start(owner, rule.new_target, f"rule {rule.name} of {owner}", Origin.RULE, None)
-                        fired.add(owner)
-                        break
-        if not self.recovery_enabled:
-            return
-        for divergence in faults:
-            node = divergence.part
-            if not isinstance(self.model.parts[node], NodePart) or node in self._failed:
-                continue
-            if node in fired or any(a in fired for a in self._above[node]):
-                continue
-            if self._inference.target(node) != divergence.target or node in self._busy_nodes():
-                continue  # a rule above has just re-targeted it
-            now = self.clock.now()
-            recent = [t for t in self._attempts.get(node, []) if now - t < self.recovery_window]
-            attempts = len(recent)
-            if attempts >= self.recovery_attempts:
-                self._failed.add(node)
-                message = f"gave up restoring {node} to {divergence.target} after {attempts} attempts"
-                log.error(message)
-                self._emit(EventKind.FAILED, node, message, divergence=divergence)
-                continue
-            self._attempts[node] = [*recent, now]
-            self._start(node, divergence.target, f"restore {node} to {divergence.target}", Origin.RECOVERY, None)
+        for action in self._reactions.decide(faults, self._inference):
+            if isinstance(action, FireRule):
+                rule = action.rule
+                message = f"rule {rule.name}: {rule.if_part} is {rule.if_part_state} -> {rule.new_target}"
+                log.info("%s: %s (attempt %d of %d)", rule.system, message, action.attempt, self.recovery_attempts)
+                self._emit(EventKind.RULE, rule.system, message)
+                self._start(rule.system, rule.new_target, f"rule {rule.name} of {rule.system}", Origin.RULE, None)
+            elif isinstance(action, Restore):
+                log.warning("restoring %s to %s (attempt %d of %d)", action.node, action.target, action.attempt,
+                            self.recovery_attempts)
+                self._start(action.node, action.target, f"restore {action.node} to {action.target}",
+                            Origin.RECOVERY, None)
+            elif isinstance(action, GiveUp):
+                part = action.divergence.part
+                log.error("%s", action.message)
+                self._divergences.note(part, action.message)
+                self._emit(EventKind.FAILED, part, action.message, divergence=action.divergence)
 
-    def _busy_nodes(self) -> set[str]:
-        busy: set[str] = set()
-        for execution in self._executions.values():
-            busy |= execution.scope
-        return busy
+    def _heading(self, part: str) -> State | None:
+        """The state a request in flight is taking ``part`` to."""
+        if not any(self._divergences.is_busy(name) for name in self._nodes_of(part)):
+            return None
+        target = self._inference.target(part)
+        return None if target is None else target.state
+
+    def _nodes_of(self, part: str) -> Iterator[str]:
+        target = self._inference.target(part)
+        if isinstance(self.model.parts[part], NodePart):
+            yield part
+        elif target is not None:
+            for name, _ in implied_targets(self.model, part, target):
+                if isinstance(self.model.parts[name], NodePart):
+                    yield name
 
     def _reachable(self, part: str, target: StateMode | None) -> bool:
         if target is None:
             return True
-        spec = self.model.parts[part]
-        if isinstance(spec, NodePart):
-            if self._unavailable(part):
-                actual = self._inference.actual(part)
-                return actual.known and actual.state_mode == target
-            return True
-        if target.state is State.ACTIVE:
-            entries = spec.modes[target.mode or spec.default_mode].entries.values()
-            return all(self._reachable(e.part, e.target) for e in entries)
-        return all(self._reachable(child, StateMode(target.state)) for child in spec.parts)
+        for name, value in implied_targets(self.model, part, target):
+            if isinstance(self.model.parts[name], NodePart) and self._unavailable(name):
+                actual = self._inference.actual(name)
+                if not (actual.known and actual.state_mode == value):
+                    return False
+        return True
 
     def _unavailable(self, node: str) -> bool:
         obs = self._inference.observation(node)
-        return node in self._failed or not obs.reachable or obs.state is State.FINALIZED
+        return node in self._reactions.gave_up or not obs.reachable or obs.state is State.FINALIZED
 
-    # -- plumbing ------------------------------------------------------------------------------
+    # -- plumbing ---------------------------------------------------------------------------------
 
     @contextmanager
     def _entry(self) -> Iterator[None]:
-        """Every entry point: serialise; the outermost one then settles (pump, evaluate, react)
-        and notifies observers. Observers may call back in: those calls only queue their effects,
-        which the outermost entry settles before it returns."""
+        """Every entry point: serialise; the outermost one then settles and notifies observers.
+        Observers may call back in: those calls only queue their effects, which the outermost
+        entry settles before it returns."""
         with self._lock:
             self._depth += 1
             try:
@@ -550,21 +493,57 @@ class ModeManager:
             self._depth += 1
             try:
                 self._settle()
-                while self._events:
-                    self._notify(self._events.pop(0))
+                while (event := self._outbox.pop()) is not None:
+                    self._notify(event)
                     self._settle()
             finally:
                 self._depth -= 1
 
+    def _locked(self, read: Callable[[], str]) -> str:
+        with self._lock:
+            return read()
+
     def _settle(self) -> None:
-        for _ in range(100):  # reactions start requests, which need pumping; bounded for safety
-            before = set(self._executions)
-            self._pump()
-            faults = self._evaluate()
+        """Work until nothing is left: the agenda, then the divergences that changed and the
+        reactions to faults (which may put more on the agenda)."""
+        for _ in range(_MAX_PASSES):
+            while self._agenda:
+                self._agenda.popleft()()
+            if not self._divergences.pending:
+                return
+            now = self.clock.now()
+            changes, faults = self._divergences.evaluate(now)
+            for change in changes:
+                self._divergence_changed(change.part, change.old, change.new, now)
+            self._schedule_grace()
             if faults:
                 self._react(faults)
-            if set(self._executions) <= before:
-                return
+        log.error("the manager did not settle after %d passes; stopped to stay responsive", _MAX_PASSES)
+
+    def _divergence_changed(self, part: str, old: Divergence | None, new: Divergence | None, now: float) -> None:
+        if new is None:
+            self._reactions.back_on_target(part, now)
+            self._emit(EventKind.DIVERGENCE, part, f"{part} is back on target {self._inference.target(part)}")
+            return
+        if new.is_error and (old is None or not old.is_error):
+            log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s: %s).",
+                        part, new.target, new.actual, new.cause.value, new.reason)
+        self._emit(EventKind.DIVERGENCE, part, str(new), divergence=new)
+
+    def _schedule_grace(self) -> None:
+        due = self._divergences.next_due()
+        if due is None or (self._grace_due is not None and self._grace_due <= due):
+            return
+        if self._grace_timer is not None:
+            self._grace_timer.cancel()
+        self._grace_due = due
+        self._grace_timer = self.clock.call_later(due - self.clock.now(), self._grace_over)
+
+    def _grace_over(self) -> None:
+        with self._entry():
+            self._grace_timer = None
+            self._grace_due = None
+            self._divergences.grace_over(self.clock.now())
 
     def _notify(self, event: Event) -> None:
         for subscription in list(self._subscriptions):
@@ -578,13 +557,16 @@ class ModeManager:
               divergence: Divergence | None = None, request: Request | None = None,
               previous: Actual | None = None, transition: Transition | None = None) -> None:
         actual = self._inference.actual(part) if part in self.model.parts else None
-        self._events.append(Event(kind, part, self.clock.now(), message, actual=actual, target=target,
-                                  divergence=divergence, request=request, previous=previous,
-                                  transition=transition))
+        self._outbox.put(Event(kind, part, self.clock.now(), message, actual=actual, target=target,
+                               divergence=divergence, request=request, previous=previous, transition=transition))
 
     def _apply(self, changes: Changes) -> None:
         for part, (old, new) in changes.items():
-            self._emit(EventKind.ACTUAL, part, f"{part}: {old} -> {new}", previous=old)
+            self._outbox.actual(Event(EventKind.ACTUAL, part, self.clock.now(), f"{part}: {old} -> {new}",
+                                      actual=new, previous=old))
+            self._divergences.touch(part)
+            for execution in list(self._confirming.get(part, ())):
+                self.confirm(execution)
 
     def _unsubscribe(self, subscription: Subscription) -> None:
         with self._lock:
@@ -602,7 +584,7 @@ class ModeManager:
         spec = self.model.parts[part]
         if mode in spec.modes:
             return mode
-        if mode in ("", DEFAULT_MODE):
+        if mode == DEFAULT_MODE:
             return spec.default_mode
         return None
 
@@ -619,8 +601,52 @@ class ModeManager:
         return self._last_mode.get(part, self.model.parts[part].default_mode)
 
 
-class _JobIO:
-    """The manager as jobs see it (``NodeIO``)."""
+def _valid(start: State, transition: Transition) -> bool:
+    try:
+        step_for(start, transition)
+    except PlanError:
+        return False
+    return True
+
+
+class _Outbox:
+    """Events waiting to be told, in order. A part's actual changes that pile up before they are
+    told become one event (first old value, last new value; none if they cancel out), so
+    observers never see the intermediate inferences of one settling."""
+
+    def __init__(self) -> None:
+        self._queue: deque[list[Event | None]] = deque()
+        self._actual: dict[str, list[Event | None]] = {}  # part -> its untold ACTUAL event's slot
+
+    def put(self, event: Event) -> None:
+        self._queue.append([event])
+
+    def actual(self, event: Event) -> None:
+        slot = self._actual.get(event.part)
+        told = slot[0] if slot is not None else None
+        if told is None:
+            slot = [event]
+            self._actual[event.part] = slot
+            self._queue.append(slot)
+            return
+        assert slot is not None
+        merged = replace(told, actual=event.actual, time=event.time,
+                         message=f"{event.part}: {told.previous} -> {event.actual}")
+        slot[0] = None if merged.previous == merged.actual else merged
+
+    def pop(self) -> Event | None:
+        while self._queue:
+            slot = self._queue.popleft()
+            event = slot[0]
+            if event is not None and self._actual.get(event.part) is slot:
+                del self._actual[event.part]
+            if event is not None:
+                return event
+        return None
+
+
+class _DriverIO:
+    """The manager as node drivers see it."""
 
     def __init__(self, manager: ModeManager) -> None:
         self._manager = manager
@@ -628,11 +654,17 @@ class _JobIO:
     def observation(self, node: str) -> NodeObservation:
         return self._manager._inference.observation(node)
 
+    def now(self) -> float:
+        return self._manager.clock.now()
+
     def send_transition(self, node: str, transition: Transition, done: Done) -> None:
         self._manager._send_transition(node, transition, done)
 
     def send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         self._manager._send_parameters(node, parameters, done)
+
+    def parameters_accepted(self, node: str, parameters: Mapping[str, ParamValue]) -> None:
+        self._manager._parameters_accepted(node, parameters)
 
 
 class _Listener:

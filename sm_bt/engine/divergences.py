@@ -1,0 +1,170 @@
+"""Which parts diverge from their target, why, and since when: evaluated incrementally.
+
+A part diverges when its target is set and its inferred actual differs. Why (:class:`Cause`):
+
+* ``IN_FLIGHT`` while a request works on a node at or below it;
+* ``GRACE`` until the divergence has lasted ``grace_period`` (the clock restarts whenever a
+  request on it starts or ends);
+* ``FAULT`` when something below went wrong by itself: a node is off its target, or a rule
+  re-targeted a part below (so a system's rules see its sub-system's rule take effect, as the
+  paper's hierarchical error handling has it);
+* ``OVERRIDE`` otherwise: a part below was asked for something else directly (left alone).
+
+The manager marks what changed (:meth:`Divergences.touch`); :meth:`Divergences.evaluate`
+re-examines only those parts and the systems above them, children before their systems.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from sm_bt.engine.events import Cause, Divergence
+from sm_bt.engine.hierarchy import Hierarchy
+from sm_bt.engine.inference import Inference
+from sm_bt.model.types import Model, SystemPart
+
+#: Clock slack: a timer set for ``since + grace`` must find the grace period over when it fires.
+EPSILON = 1e-6
+
+
+@dataclass(frozen=True)
+class Change:
+    """A divergence that started (``old`` None), ended (``new`` None) or changed."""
+
+    part: str
+    old: Divergence | None
+    new: Divergence | None
+
+
+class Divergences:
+    """The divergence of every part, kept up to date from what the manager marks as changed."""
+
+    def __init__(self, model: Model, hierarchy: Hierarchy, inference: Inference, grace_period: float) -> None:
+        self._model = model
+        self._hierarchy = hierarchy
+        self._inference = inference
+        self.grace_period = grace_period
+        self.records: dict[str, Divergence] = {}
+        self._since: dict[str, float] = {}
+        self._busy: dict[str, int] = {}  # (request, node) pairs in flight at or below each part
+        self._faulty: set[str] = set()  # off target by itself, or with a fault below
+        self._retargeted: set[str] = set()  # parts whose target a rule set directly
+        self._notes: dict[str, str] = {}  # what the manager adds to the reason (recovery gave up)
+        self._dirty: set[str] = set()
+        self._grace: list[tuple[float, str]] = []  # (due, part), a heap; stale entries are skipped
+
+    # -- what changed (from the manager) ---------------------------------------------------------
+
+    def touch(self, part: str) -> None:
+        """``part``'s actual, target or circumstances changed: re-examine it and its systems."""
+        if part not in self._dirty:
+            self._dirty.add(part)
+            self._dirty.update(self._hierarchy.ancestors[part])
+
+    @property
+    def pending(self) -> bool:
+        return bool(self._dirty)
+
+    def busy(self, nodes: Iterable[str], delta: int) -> None:
+        """A request started (``+1``) or ended (``-1``) working on ``nodes``. Either way the grace
+        period of each part involved starts again."""
+        for node in nodes:
+            for part in (node, *self._hierarchy.ancestors[node]):
+                self._busy[part] = self._busy.get(part, 0) + delta
+                self._since.pop(part, None)
+                self.touch(part)
+
+    def is_busy(self, part: str) -> bool:
+        return self._busy.get(part, 0) > 0
+
+    def retargeted(self, part: str, by_rule: bool) -> None:
+        """Whether ``part``'s target was last set by one of its rules (rather than by a request
+        for it or for a system above it)."""
+        if by_rule:
+            self._retargeted.add(part)
+        else:
+            self._retargeted.discard(part)
+        self.touch(part)
+
+    def is_retargeted(self, part: str) -> bool:
+        return part in self._retargeted
+
+    def note(self, part: str, text: str | None) -> None:
+        if text is None:
+            self._notes.pop(part, None)
+        else:
+            self._notes[part] = text
+        self.touch(part)
+
+    def grace_over(self, now: float) -> None:
+        """Mark the parts whose grace period is over by ``now``."""
+        while self._grace and self._grace[0][0] <= now + EPSILON:
+            self.touch(heapq.heappop(self._grace)[1])
+
+    def next_due(self) -> float | None:
+        """When the earliest grace period still running ends."""
+        while self._grace:
+            due, part = self._grace[0]
+            record = self.records.get(part)
+            live = record is not None and record.cause is Cause.GRACE
+            if live and record is not None and abs(record.since + self.grace_period - due) < EPSILON:
+                return due
+            heapq.heappop(self._grace)
+        return None
+
+    # -- evaluation ------------------------------------------------------------------------------
+
+    def evaluate(self, now: float) -> tuple[list[Change], list[Divergence]]:
+        """Re-examine what changed: the divergences that started, ended or changed, and every
+        re-examined divergence that is a ``FAULT`` (children before their systems)."""
+        height = self._hierarchy.height
+        dirty, self._dirty = sorted(self._dirty, key=height.__getitem__), set()
+        changes: list[Change] = []
+        faults: list[Divergence] = []
+        for part in dirty:
+            new = self._examine(part, now)
+            old = self.records.get(part)
+            if new is None:
+                if old is not None:
+                    del self.records[part]
+                    self._notes.pop(part, None)
+                    changes.append(Change(part, old, None))
+                continue
+            self.records[part] = new
+            if old is None or (old.cause, old.actual, old.reason, old.target) != (new.cause, new.actual, new.reason,
+                                                                                 new.target):
+                changes.append(Change(part, old, new))
+            if new.cause is Cause.FAULT:
+                faults.append(new)
+        return changes, faults
+
+    def _examine(self, part: str, now: float) -> Divergence | None:
+        target = self._inference.target(part)
+        actual = self._inference.actual(part)
+        on_target = target is None or (actual.known and actual.state_mode == target)
+        spec = self._model.parts[part]
+        if isinstance(spec, SystemPart):
+            faulty = any(c in self._faulty or c in self._retargeted for c in spec.parts)
+        else:
+            faulty = not on_target
+        if faulty:
+            self._faulty.add(part)
+        else:
+            self._faulty.discard(part)
+        if target is None or on_target:
+            self._since.pop(part, None)
+            return None
+        since = self._since.setdefault(part, now)
+        if self.is_busy(part):
+            cause = Cause.IN_FLIGHT
+        elif now - since < self.grace_period - EPSILON:
+            cause = Cause.GRACE
+            heapq.heappush(self._grace, (since + self.grace_period, part))
+        elif faulty:
+            cause = Cause.FAULT
+        else:
+            cause = Cause.OVERRIDE
+        reason = self._notes.get(part) or actual.reason
+        return Divergence(part, target, actual, since, cause, reason)

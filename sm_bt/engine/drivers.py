@@ -1,0 +1,229 @@
+"""Node drivers: one per node, the only part of the engine that sends calls to a node.
+
+A driver takes its node towards the goal of the plan step that owns it, one confirmed step at a
+time: the mode's full parameter set first (so a node that configures or activates reads its new
+mode), then each lifecycle transition on the planned path. Requests come and go (a newer one
+preempts an older one), but the driver stays, and with it what is in flight on the node: a
+lifecycle transition cannot be taken back in the middle of its callback, so a new owner waits for
+the outcome of the call in flight and goes on from the state the node is then in. No call is ever
+sent that conflicts with one of the manager's own calls still in flight.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Protocol
+
+from sm_bt.engine.backend import CallResult, Done
+from sm_bt.engine.inference import NodeObservation
+from sm_bt.engine.lifecycle import PlanError, Transition, plan
+from sm_bt.model.states import State
+from sm_bt.model.types import NodeMode, ParamValue
+
+
+@dataclass(frozen=True)
+class Goal:
+    """What a plan step asks of a node: a lifecycle state and, for ``active``, a node mode."""
+
+    state: State
+    mode: NodeMode | None = None
+
+    def __str__(self) -> str:
+        return self.state.label if self.mode is None else f"{self.state.label}.{self.mode.name}"
+
+
+class Owner(Protocol):
+    """The plan step a driver works for."""
+
+    @property
+    def goal(self) -> Goal: ...
+
+    @property
+    def reached_goal(self) -> bool:
+        """True once :meth:`reached` was called (the step then only watches its node)."""
+
+    def reached(self) -> None:
+        """The node is in the goal (state and parameters confirmed by the node's reports)."""
+
+    def failed(self, reason: str) -> None:
+        """The node cannot be taken to the goal, or left it again while the request was running."""
+
+
+class DriverIO(Protocol):
+    """What a driver needs from the manager."""
+
+    def observation(self, node: str) -> NodeObservation: ...
+
+    def now(self) -> float: ...
+
+    def send_transition(self, node: str, transition: Transition, done: Done) -> None: ...
+
+    def send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None: ...
+
+    def parameters_accepted(self, node: str, parameters: Mapping[str, ParamValue]) -> None:
+        """A parameter set was answered with success: the node holds these values now."""
+
+
+@dataclass
+class _Call:
+    label: str  # what was asked, as the feedback shows it
+    sent: float
+    owner: Owner | None  # who it was sent for (it may have been preempted since)
+    transition: Transition | None = None  # None for a parameter set
+    start: State = State.UNKNOWN  # the state a transition was sent from
+
+    @property
+    def what(self) -> str:
+        """The call itself (``activate``), without the feedback's progress."""
+        return self.label if self.transition is None else self.transition.label
+
+
+class NodeDriver:
+    """Drives ``node`` for whichever plan step owns it (``assign``/``release``)."""
+
+    def __init__(self, node: str, io: DriverIO) -> None:
+        self.node = node
+        self.io = io
+        self.owner: Owner | None = None
+        self.call: _Call | None = None
+        # After a transition answered with success: its start state, until a report shows the node
+        # left it (the answer and the node's state reports may arrive in either order).
+        self._leaving: State | None = None
+        self._parameters_set_for: str | None = None  # mode whose set this owner got answered
+
+    # -- ownership ------------------------------------------------------------------------------
+
+    def assign(self, owner: Owner) -> None:
+        self.owner = owner
+        self._parameters_set_for = None
+        self.advance()
+
+    def release(self, owner: Owner) -> None:
+        if self.owner is owner:
+            self.owner = None
+
+    def node_appeared(self) -> None:
+        """A (new) process of the node was reported: nothing from the old one is awaited."""
+        self._leaving = None
+
+    # -- progress -------------------------------------------------------------------------------
+
+    def advance(self) -> None:
+        """Take the next step if one can be taken now; call after anything about the node changed."""
+        owner = self.owner
+        if owner is None or self.call is not None:
+            return
+        obs = self.io.observation(self.node)
+        if owner.reached_goal:
+            if obs.gone or not self._at(owner.goal, obs):
+                owner.failed(f"{self.node} left {owner.goal} while the request was in progress "
+                             f"(now {self._describe(obs)})")
+            return
+        if obs.gone:
+            owner.failed(f"{self.node}: {obs.gone}")
+            return
+        if not obs.seen or not obs.state.is_primary or obs.state is self._leaving:
+            return
+        self._leaving = None
+        goal = owner.goal
+        if goal.state is State.ACTIVE and goal.mode is not None and not goal.mode.matches(obs.parameters):
+            if self._parameters_set_for == goal.mode.name:
+                owner.failed(f"{self.node}: the parameters of mode {goal.mode.name} were accepted but do not "
+                             f"read back as that mode ({self._describe(obs)})")
+                return
+            self._send_parameters(owner, goal.mode)
+            return
+        if obs.state is not goal.state:
+            try:
+                path = plan(obs.state, goal.state)
+            except PlanError as error:
+                owner.failed(f"{self.node}: {error}")
+                return
+            more = f" (1 of {len(path)} steps to {goal.state.label})" if len(path) > 1 else ""
+            self._send_transition(owner, path[0].transition, obs.state, more)
+            return
+        owner.reached()
+
+    def describe(self) -> str:
+        """The step in progress, for a request's feedback."""
+        obs = self.io.observation(self.node)
+        if self.call is not None:
+            return f"{self.node}: {self.call.label}"
+        owner = self.owner
+        if owner is not None and owner.reached_goal:
+            return f"{self.node}: done"
+        if obs.gone:
+            return f"{self.node}: {obs.gone}"
+        if not obs.seen:
+            return f"{self.node}: waiting for the node to appear"
+        if not obs.state.is_primary:
+            return f"{self.node}: waiting while it is {obs.state.label}"
+        if obs.state is self._leaving:
+            return f"{self.node}: waiting for its state report (still {obs.state.label})"
+        return f"{self.node}: next step towards {owner.goal if owner else 'nothing'}"
+
+    def stall(self) -> str:
+        """Why the node is not there yet, for a request that ran out of time."""
+        obs = self.io.observation(self.node)
+        if self.call is not None:
+            waited = self.io.now() - self.call.sent
+            if self.call.transition is not None and not obs.state.is_primary:
+                return f"{self.node} hung in {obs.state.label} for {waited:.3g} s"
+            return f"no answer from {self.node} to {self.call.what} for {waited:.3g} s"
+        return self.describe()
+
+    # -- calls ----------------------------------------------------------------------------------
+
+    def _send_parameters(self, owner: Owner, mode: NodeMode) -> None:
+        values = mode.values()
+        call = _Call(f"set parameters of mode {mode.name}", self.io.now(), owner)
+        self.call = call
+
+        def done(result: CallResult) -> None:
+            if self.call is not call:
+                return
+            self.call = None
+            if result.ok:
+                self.io.parameters_accepted(self.node, values)
+                if self.owner is owner:
+                    self._parameters_set_for = mode.name
+            self._answered(call, result)
+
+        self.io.send_parameters(self.node, values, done)
+
+    def _send_transition(self, owner: Owner, transition: Transition, start: State, more: str) -> None:
+        call = _Call(transition.label + more, self.io.now(), owner, transition, start)
+        self.call = call
+
+        def done(result: CallResult) -> None:
+            if self.call is not call:
+                return
+            self.call = None
+            self._leaving = start if result.ok else None
+            self._answered(call, result)
+
+        self.io.send_transition(self.node, transition, done)
+
+    def _answered(self, call: _Call, result: CallResult) -> None:
+        owner = self.owner
+        if not result.ok and owner is not None and owner is call.owner:
+            owner.failed(f"{self.node}: {call.what} failed: {result.reason or 'refused'}")
+            return
+        # A failure of a call made for an earlier (preempted) owner is not the new owner's: it
+        # goes on from wherever the node now is.
+        self.advance()
+
+    # -- helpers --------------------------------------------------------------------------------
+
+    @staticmethod
+    def _at(goal: Goal, obs: NodeObservation) -> bool:
+        if obs.state is not goal.state:
+            return False
+        return goal.state is not State.ACTIVE or goal.mode is None or goal.mode.matches(obs.parameters)
+
+    @staticmethod
+    def _describe(obs: NodeObservation) -> str:
+        if obs.gone:
+            return obs.gone
+        return obs.state.label

@@ -1,0 +1,195 @@
+"""Execution plans: what a target asks of each node, in the model's switching order.
+
+A plan is a tree of jobs: a :class:`Step` takes one node to its goal (through the node's
+:class:`~sm_bt.engine.drivers.NodeDriver`); :class:`Sequence` runs the stages of a switching
+order one after another, :class:`Parallel` the parts of one stage together. Progress is pushed,
+not polled: a step that reaches its goal tells its parent, which starts what comes next. Every
+hand-over goes through the run's agenda (``later``), so nothing recurses however deep the
+hierarchy is, and the work per node report is proportional to what it changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Protocol
+
+from sm_bt.engine.drivers import Goal, NodeDriver
+from sm_bt.engine.hierarchy import child_targets
+from sm_bt.model.states import State, StateMode
+from sm_bt.model.types import Model, NodePart, SystemPart
+
+
+class Run(Protocol):
+    """The execution a plan belongs to."""
+
+    @property
+    def active(self) -> bool:
+        """False once the execution finished: late hand-overs are then ignored."""
+
+    def later(self, action: Callable[[], None]) -> None:
+        """Run ``action`` once the current one is over (the manager's agenda)."""
+
+    def driver(self, node: str) -> NodeDriver: ...
+
+    def plan_done(self) -> None: ...
+
+    def plan_failed(self, reason: str) -> None: ...
+
+
+class Job:
+    parent: _Composite | None = None
+    done = False
+
+    def __init__(self, run: Run) -> None:
+        self.run = run
+
+    def start(self) -> None:
+        raise NotImplementedError
+
+    def _finished(self) -> None:
+        self.done = True
+        parent = self.parent
+        if parent is None:
+            self.run.later(self.run.plan_done)
+        else:
+            self.run.later(lambda: parent.child_done(self))
+
+
+class Step(Job):
+    """Take ``node`` to ``goal``; once there, watch it until the execution ends."""
+
+    def __init__(self, run: Run, node: str, goal: Goal) -> None:
+        super().__init__(run)
+        self.node = node
+        self._goal = goal
+        self.started = False
+
+    @property
+    def goal(self) -> Goal:
+        return self._goal
+
+    @property
+    def reached_goal(self) -> bool:
+        return self.done
+
+    def start(self) -> None:
+        if self.run.active:
+            self.started = True
+            self.run.driver(self.node).assign(self)
+
+    def reached(self) -> None:
+        if self.run.active and not self.done:
+            self._finished()
+
+    def failed(self, reason: str) -> None:
+        if self.run.active:
+            self.run.plan_failed(reason)
+
+    def release(self) -> None:
+        self.run.driver(self.node).release(self)
+
+
+class _Composite(Job):
+    def __init__(self, run: Run) -> None:
+        super().__init__(run)
+        self.children: list[Job] = []
+
+    def child_done(self, child: Job) -> None:
+        raise NotImplementedError
+
+
+class Sequence(_Composite):
+    """Children one after another (the stages of a switching order)."""
+
+    index = 0
+
+    def start(self) -> None:
+        self._next()
+
+    def child_done(self, child: Job) -> None:
+        if self.run.active:
+            self.index += 1
+            self._next()
+
+    def _next(self) -> None:
+        if self.index < len(self.children):
+            self.run.later(self.children[self.index].start)
+        else:
+            self._finished()
+
+
+class Parallel(_Composite):
+    """Children all at once (one stage)."""
+
+    left = 0
+
+    def start(self) -> None:
+        self.left = len(self.children)
+        if not self.children:
+            self._finished()
+        for child in self.children:
+            self.run.later(child.start)
+
+    def child_done(self, child: Job) -> None:
+        if self.run.active:
+            self.left -= 1
+            if self.left == 0:
+                self._finished()
+
+
+def build_plan(model: Model, run: Run, part: str, target: StateMode) -> tuple[Job, list[Step]]:
+    """The plan taking ``part`` to ``target``, and its steps (one per node, in plan order).
+
+    A system's target becomes a :class:`Sequence` of its switching order's stages, each a
+    :class:`Parallel` of its parts; going to a non-active state, the parts are taken down in the
+    reverse order of the default mode's stages. A node shared by two systems gets one step, at
+    its first place (the one :func:`~sm_bt.engine.hierarchy.implied_targets` gives its target).
+    """
+    steps: list[Step] = []
+    seen: set[str] = set()
+    top: list[Job] = []
+    # Top-down without recursion: each entry is a part to expand and the child list its job joins
+    # (pushed reversed, so every list fills in model order).
+    stack: list[tuple[str, StateMode, list[Job]]] = [(part, target, top)]
+    while stack:
+        name, value, into = stack.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        spec = model.parts[name]
+        if isinstance(spec, NodePart):
+            mode = spec.modes[value.mode or spec.default_mode] if value.state is State.ACTIVE else None
+            step = Step(run, name, Goal(value.state, mode))
+            steps.append(step)
+            into.append(step)
+            continue
+        wanted = dict(child_targets(spec, value))
+        sequence = Sequence(run)
+        into.append(sequence)
+        pending: list[tuple[str, StateMode, list[Job]]] = []
+        for stage in _stages(spec, value):
+            members = [child for child in stage if child in wanted]
+            if members:
+                parallel = Parallel(run)
+                parallel.parent = sequence
+                sequence.children.append(parallel)
+                pending.extend((child, wanted[child], parallel.children) for child in members)
+        stack.extend(reversed(pending))
+    _link(top[0])
+    return top[0], steps
+
+
+def _stages(spec: SystemPart, target: StateMode) -> tuple[tuple[str, ...], ...]:
+    if target.state is State.ACTIVE:
+        return spec.modes[target.mode or spec.default_mode].stages
+    return tuple(reversed(spec.modes[spec.default_mode].stages))
+
+
+def _link(top: Job) -> None:
+    stack = [top]
+    while stack:
+        job = stack.pop()
+        if isinstance(job, _Composite):
+            for child in job.children:
+                child.parent = job
+                stack.append(child)
