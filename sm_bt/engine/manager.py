@@ -196,23 +196,23 @@ class ModeManager:
     def change_state(self, part: str, transition: Transition | str | int, *,
                      timeout: float | None = None) -> Request:
         """Ask for a lifecycle transition of ``part`` (system or node): ``"configure"``,
-        ``"activate"``, ``Transition.DEACTIVATE``, ... Returns at once. The transition must be
-        valid where the part is, or where a request in flight is taking it; a part already in
-        the transition's goal state succeeds at once. Activation keeps the last mode asked for."""
+        ``"activate"``, ``Transition.DEACTIVATE``, ... Returns at once. A settled part must be in
+        a state the transition is valid from (as a lifecycle node requires), or already in its
+        goal state (then it succeeds at once); while a request is moving the part, any requestable
+        transition is accepted and its goal state becomes the new target. Activation keeps the
+        last mode asked for."""
         with self._entry():
             name = transition.label if isinstance(transition, Transition) else str(transition)
             description = f"change_state {part} {name}"
             if part not in self.model.parts:
                 return self._refuse(part, description, self._unknown_part(part))
             current = self._inference.actual(part).state
-            heading = self._heading(part)
             try:
                 resolved = self._resolve_transition(transition, current)
                 if resolved not in _GOAL:
                     raise PlanError(f"{resolved.label} ({int(resolved)}) cannot be requested")
                 goal = _GOAL[resolved]
-                valid_ahead = heading is not None and _valid(heading, resolved)
-                if current.is_primary and goal not in (current, heading) and not valid_ahead:
+                if current.is_primary and goal is not current and not self._moving(part):
                     step_for(current, resolved)  # raises with the valid ones when invalid here
             except (PlanError, ValueError) as error:
                 return self._refuse(part, description, f"{part}: {error}")
@@ -445,21 +445,9 @@ class ModeManager:
                 self._divergences.note(part, action.message)
                 self._emit(EventKind.FAILED, part, action.message, divergence=action.divergence)
 
-    def _heading(self, part: str) -> State | None:
-        """The state a request in flight is taking ``part`` to."""
-        if not any(self._divergences.is_busy(name) for name in self._nodes_of(part)):
-            return None
-        target = self._inference.target(part)
-        return None if target is None else target.state
-
-    def _nodes_of(self, part: str) -> Iterator[str]:
-        target = self._inference.target(part)
-        if isinstance(self.model.parts[part], NodePart):
-            yield part
-        elif target is not None:
-            for name, _ in implied_targets(self.model, part, target):
-                if isinstance(self.model.parts[name], NodePart):
-                    yield name
+    def _moving(self, part: str) -> bool:
+        """A request in flight is working on ``part`` (or on a node below it)."""
+        return self._divergences.is_busy(part)
 
     def _reachable(self, part: str, target: StateMode | None) -> bool:
         if target is None:
@@ -599,14 +587,6 @@ class ModeManager:
     def _mode_for_activation(self, part: str) -> str:
         """Activation keeps the mode last asked for (the reference falls back to the default)."""
         return self._last_mode.get(part, self.model.parts[part].default_mode)
-
-
-def _valid(start: State, transition: Transition) -> bool:
-    try:
-        step_for(start, transition)
-    except PlanError:
-        return False
-    return True
 
 
 class _Outbox:
