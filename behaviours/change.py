@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from sm_bt.behaviours.manager_access import ManagerBehaviour
+from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
@@ -76,6 +76,7 @@ class ChangeMode(_RequestBehaviour):
 
     def __init__(self, name: str, part: str, mode: str, timeout: float | None = None) -> None:
         super().__init__(name, part, timeout)
+        require_mode_name(name, part, mode)
         self.mode = mode
 
     def validate(self, manager: ModeManager) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from sm_bt.behaviours.manager_access import ManagerBehaviour
+from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name
 from sm_bt.engine.inference import Actual
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.states import State
@@ -113,6 +113,7 @@ class ModeIs(_Check):
     """
 
     def __init__(self, name: str, part: str, mode: str) -> None:
+        require_mode_name(name, part, mode)
         super().__init__(name, part, _InMode(mode))
 
 
@@ -127,15 +128,17 @@ class StateIs(_Check):
 class WaitForMode(_Wait):
     """Wait until ``part`` is active in ``mode``: RUNNING until then, SUCCESS when it is; with a
     ``timeout`` (seconds of the manager's clock, counted from ``initialise``) FAILURE when it
-    expires first. It only watches: nothing is requested."""
+    expires first. It only watches: nothing is requested. Without a timeout it waits for as long
+    as it takes: give one unless something else bounds the wait."""
 
     def __init__(self, name: str, part: str, mode: str, timeout: float | None = None) -> None:
+        require_mode_name(name, part, mode)
         super().__init__(name, part, _InMode(mode), timeout)
 
 
 class WaitForState(_Wait):
     """Wait until ``part`` is in lifecycle ``state``: RUNNING until then, SUCCESS when it is;
-    FAILURE when the optional ``timeout`` expires first."""
+    FAILURE when the optional ``timeout`` expires first (without one, it waits without bound)."""
 
     def __init__(self, name: str, part: str, state: State | str, timeout: float | None = None) -> None:
         super().__init__(name, part, _InState(state), timeout)

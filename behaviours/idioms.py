@@ -11,9 +11,8 @@ import py_trees
 from py_trees.common import Status
 
 from sm_bt.behaviours.change import ChangeMode
-from sm_bt.behaviours.checks import WaitForMode
 from sm_bt.behaviours.divergence import OnDivergence
-from sm_bt.behaviours.manager_access import ManagerBehaviour
+from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
@@ -37,6 +36,7 @@ class HoldMode(ManagerBehaviour):
 
     def __init__(self, name: str, part: str, mode: str, timeout: float | None = None) -> None:
         super().__init__(name)
+        require_mode_name(name, part, mode)
         self.part = part
         self.mode = mode
         self.timeout = timeout
@@ -47,6 +47,11 @@ class HoldMode(ManagerBehaviour):
 
     def validate(self, manager: ModeManager) -> None:
         self._held = StateMode(State.ACTIVE, self._check_mode(manager, self.part, self.mode))
+
+    @property
+    def held(self) -> StateMode | None:
+        """The state and mode held (known once set up)."""
+        return self._held
 
     def initialise(self) -> None:
         """Remember the current target and request the mode."""
@@ -98,21 +103,59 @@ def _report_restore(request: Request) -> None:
         log.warning("could not restore (%s): %s", request.description, request.reason)
 
 
+class HeldModeReady(ManagerBehaviour):
+    """The gate of :func:`hold_mode`'s work: has ``hold`` put its part in the mode?
+
+    * ``update``: RUNNING while the hold's request is in progress (bounded by that request's
+      timeout); SUCCESS once it succeeded and the part is still in the mode; FAILURE when the
+      request failed, or the part lost the mode before the work could start (it never waits
+      for the mode to come back: that wait would have no bound)
+    """
+
+    def __init__(self, name: str, hold: HoldMode) -> None:
+        super().__init__(name)
+        self.hold = hold
+
+    def validate(self, manager: ModeManager) -> None:
+        self._check_mode(manager, self.hold.part, self.hold.mode)
+
+    def update(self) -> Status:
+        """RUNNING while the hold's change is in progress, then SUCCESS or FAILURE at once."""
+        request = self.hold.request
+        if request is None:
+            self.feedback_message = "the hold has not started"
+            return Status.FAILURE
+        if not request.done:
+            self.feedback_message = f"waiting for {request.description}"
+            return Status.RUNNING
+        if not request.succeeded:
+            self.feedback_message = request.reason
+            return Status.FAILURE
+        part, actual = self.hold.part, self.manager.actual(self.hold.part)
+        if actual.known and actual.state_mode == self.hold.held:
+            self.feedback_message = f"{part} is {actual}"
+            return Status.SUCCESS
+        self.feedback_message = f"{part} lost {self.hold.held} before the work started (now {actual})"
+        return Status.FAILURE
+
+
 def hold_mode(name: str, part: str, mode: str, child: py_trees.behaviour.Behaviour,
               timeout: float | None = None) -> py_trees.behaviour.Behaviour:
     """Run ``child`` with ``part`` held in ``mode``; restore the part's previous target when the
     subtree ends, whether ``child`` succeeded, failed or was interrupted.
 
     Returns ``Parallel(SuccessOnOne)`` of a :class:`HoldMode` and ``Sequence(memory=True)`` of
-    ``WaitForMode(part, mode)`` then ``child``: the child starts once the part is confirmed in
-    the mode, the subtree has the child's result, and it fails if the mode cannot be reached.
+    :class:`HeldModeReady` then ``child``: the child starts once the hold's change is confirmed,
+    the subtree has the child's result, and it fails if the mode cannot be reached (within
+    ``timeout``, or the manager's ``request_timeout``) or is lost before the child starts.
     """
+    hold = HoldMode(f"Hold {part} in {mode}", part, mode, timeout=timeout)
     work = py_trees.composites.Sequence(f"{name}: work", memory=True, children=[
-        WaitForMode(f"In {mode}?", part, mode),
+        HeldModeReady(f"In {mode}?", hold),
         child,
     ])
     return py_trees.composites.Parallel(name, policy=py_trees.common.ParallelPolicy.SuccessOnOne(), children=[
-        HoldMode(f"Hold {part} in {mode}", part, mode, timeout=timeout),
+        hold,
         work,
     ])
 

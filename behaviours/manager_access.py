@@ -24,6 +24,13 @@ def _hint(behaviour: py_trees.behaviour.Behaviour) -> str:
             "tree.setup(manager=ModeManager(model, backend))")
 
 
+def require_mode_name(behaviour: str, part: str, mode: str) -> None:
+    """``ValueError`` for an empty mode name: ``__DEFAULT__`` is the explicit name of the default."""
+    if not mode:
+        raise ValueError(f"{behaviour}: the mode name of {part} is empty (name a mode, or {DEFAULT_MODE} "
+                         "for the default mode)")
+
+
 class ManagerBehaviour(py_trees.behaviour.Behaviour):
     """A behaviour that works through a :class:`ModeManager`.
 
@@ -62,12 +69,13 @@ class ManagerBehaviour(py_trees.behaviour.Behaviour):
                              f"(parts: {', '.join(manager.model.parts)})")
 
     def _check_mode(self, manager: ModeManager, part: str, mode: str) -> str:
-        """The mode name ``mode`` stands for (``""``/``__DEFAULT__`` is the part's default mode)."""
+        """The mode name ``mode`` stands for (``__DEFAULT__`` is the part's default mode)."""
         self._check_part(manager, part)
+        require_mode_name(self.name, part, mode)
         spec = manager.model.parts[part]
         if mode in spec.modes:
             return mode
-        if mode in ("", DEFAULT_MODE):
+        if mode == DEFAULT_MODE:
             return spec.default_mode
         raise ValueError(f"{self.qualified_name}: {part} has no mode {mode!r} "
                          f"(modes: {', '.join(manager.available_modes(part))})")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import py_trees
 import pytest
@@ -20,7 +20,17 @@ from tree_helpers import (
     tick_until_done,
 )
 
-from sm_bt.behaviours import ChangeMode, HoldMode, OnDivergence, Reconfigure, hold_mode, switch_on_divergence
+from sm_bt.behaviours import (
+    ChangeMode,
+    HoldMode,
+    ModeIs,
+    OnDivergence,
+    Reconfigure,
+    WaitForMode,
+    hold_mode,
+    switch_on_divergence,
+)
+from sm_bt.engine.events import Event, EventKind
 from sm_bt.engine.lifecycle import Outcome, Transition
 from sm_bt.model.states import State, StateMode
 from sm_bt.reasoner import PILOT_OBJECTIVE, FunctionDesign, Reasoner, pilot_reasoner
@@ -174,6 +184,37 @@ def test_failure_when_the_held_mode_cannot_be_reached(rig: Rig) -> None:
     settle(rig, restore)
     assert rig.manager.target("pilot") == NORMAL
     assert pilot_mode(rig) == "active.f_normal_mode"
+
+
+def test_the_mode_lost_before_the_work_starts_fails_the_subtree_instead_of_waiting_for_ever(rig: Rig) -> None:
+    # The change succeeds between two ticks, and the laser fails before the next tick: the work
+    # must not wait (without a bound) for a mode that nothing brings back (recovery is off).
+    def fail_laser_once_held(event: Event) -> None:
+        request = event.request
+        if request is not None and request.done and request.succeeded and "f_energy_saving_mode" in request.description:
+            rig.backend.trigger("laser_resender", Transition.DEACTIVATE, Outcome.ERROR)
+
+    rig.manager.subscribe(fail_laser_once_held, kinds=[EventKind.REQUEST])
+    work = Probe("Work", [Status.SUCCESS])
+    subtree = hold_mode("Save energy", "pilot", "f_energy_saving_mode", work)
+    trace = tick_until_done(build(subtree, rig), rig, limit=5.0)
+    assert trace[-1].status is Status.FAILURE
+    assert work.seen == [], "the work never ran"
+    gate = subtree.children[1].children[0]
+    assert gate.feedback_message.startswith("pilot lost active.f_energy_saving_mode before the work started")
+    assert held(subtree).restore_request is not None  # the previous target is asked back
+
+
+@pytest.mark.parametrize("make", [
+    lambda: ChangeMode("Change", "pilot", ""),
+    lambda: HoldMode("Hold", "pilot", ""),
+    lambda: hold_mode("Hold", "pilot", "", Probe("Work", [Status.SUCCESS])),
+    lambda: ModeIs("Is", "pilot", ""),
+    lambda: WaitForMode("Wait", "pilot", ""),
+])
+def test_an_empty_mode_name_is_refused_when_the_behaviour_is_made(make: Callable[[], object]) -> None:
+    with pytest.raises(ValueError, match=r"mode name of pilot is empty .*__DEFAULT__"):
+        make()
 
 
 def test_holding_the_mode_the_part_is_in_restores_nothing(rig: Rig) -> None:
