@@ -266,7 +266,7 @@ class ModeManager:
         with self._entry():
             log.info("node %s appeared: %s%s", node, report.state.label,
                      "" if report.lifecycle else " (parameters only)")
-            self._reactions.reset([node])
+            self._renew_budgets([node])
             self._drivers[node].node_appeared()
             self._apply(self._inference.node_appeared(node, report.state, report.parameters, report.lifecycle))
             self._drivers[node].advance()
@@ -336,7 +336,7 @@ class ModeManager:
                 self.finish(execution, False, f"preempted by request #{request.id} ({description})")
         previous = self._assign_targets(implied, origin, transition)
         if origin is Origin.USER:
-            self._reactions.reset(previous)
+            self._renew_budgets(previous)
         execution = Execution(self, request, scope, previous)
         request._progress = lambda: self._locked(execution.feedback)
         self._executions[request.id] = execution
@@ -444,6 +444,13 @@ class ModeManager:
                 log.error("%s", action.message)
                 self._divergences.note(part, action.message)
                 self._emit(EventKind.FAILED, part, action.message, divergence=action.divergence)
+
+    def _renew_budgets(self, parts: Iterable[str]) -> None:
+        """Rules and recovery may act on ``parts`` again (a user asked for them, or a node restarted)."""
+        for part in parts:
+            if part in self._reactions.gave_up:
+                self._divergences.note(part, None)
+        self._reactions.reset(parts)
 
     def _moving(self, part: str) -> bool:
         """A request in flight is working on ``part`` (or on a node below it)."""
