@@ -266,6 +266,7 @@ def format_value(value: ParamValue) -> str:
 
 
 def run_manager(args: argparse.Namespace) -> int:
+    manager_cli.configure_logging(args.log_level)  # stderr, ROS 2's format; the library never does this
     model = _load_or_report(args.model, strict=not args.lenient)
     if model is None:
         return 1

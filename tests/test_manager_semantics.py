@@ -206,3 +206,19 @@ def test_no_failure_is_caused_by_the_managers_own_calls() -> None:
             rig.until(lambda: first.done and second.done)  # noqa: B023 (used at once)
             assert second.succeeded, (first_mode, second_mode, second.reason)
             assert not MANAGER_CAUSED.search(first.reason), (first_mode, second_mode, first.reason)
+
+
+def test_a_request_that_needs_a_vanished_node_is_refused_and_changes_nothing() -> None:
+    rig = Rig(bundled("pilot"), rules=False, recovery=False, vanish_after=0.5)
+    rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    rig.backend.crash("laser_resender")
+    rig.run(1.0)
+    sent = len(rig.backend.events)
+    request = rig.manager.change_mode("pilot", "f_performance_mode")
+    assert request.done and not request.succeeded
+    assert request.reason.startswith("laser_resender is not reachable (no answer for")
+    assert rig.manager.target("pilot") == StateMode(State.ACTIVE, "f_normal_mode")
+    assert rig.manager.target("controller_server") == StateMode(State.ACTIVE, "__DEFAULT__")
+    assert len(rig.backend.events) == sent, "no node was touched"
+    # A mode that leaves the vanished node alone is still fine.
+    assert rig.finish(rig.manager.change_mode("controller_server", "FAST")).succeeded

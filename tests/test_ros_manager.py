@@ -13,6 +13,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -194,10 +195,12 @@ def test_a_node_that_stops_cleanly_is_reported_gone_at_once(node_processes: Star
 
 
 @pytest.fixture
-def manager_process() -> Iterator[subprocess.Popen[str]]:
-    """``sm-bt manager actuation`` in its own process (SIGINT, then SIGKILL at teardown)."""
+def manager_process(tmp_path: Path) -> Iterator[subprocess.Popen[str]]:
+    """``sm-bt manager actuation`` in its own process (SIGINT, then SIGKILL at teardown). Its log
+    goes to a file (a pipe nobody reads could fill up and block it)."""
+    log = (tmp_path / "manager.log").open("w")
     process = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "manager", "actuation", "--grace-period", "0.5"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, stderr=log, text=True)
     yield process
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
@@ -206,6 +209,7 @@ def manager_process() -> Iterator[subprocess.Popen[str]]:
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait(5.0)
+    log.close()
 
 
 def test_a_plain_client_changes_the_mode_of_actuation_and_sees_mode_event(

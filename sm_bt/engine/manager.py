@@ -91,6 +91,7 @@ class ModeManager:
         self._executions: dict[int, Execution] = {}
         self._confirming: dict[str, set[Execution]] = {}  # part -> executions waiting for its actual
         self._last_mode: dict[str, str] = {}  # the last active mode asked for, kept over deactivation
+        self._reported: set[str] = set()  # divergences already logged as errors
         self._agenda: deque[Callable[[], None]] = deque()
         self._outbox = _Outbox()
         self._subscriptions: list[Subscription] = []
@@ -327,10 +328,16 @@ class ModeManager:
 
     def _start(self, part: str, target: StateMode, description: str, origin: Origin,
                timeout: float | None, transition: Transition | None = None) -> Request:
-        request = Request(part, target, description, origin, self.clock.now(), withdraw=self._withdraw)
-        log.info("request #%d %s started [%s]", request.id, description, origin.value)
         implied = implied_targets(self.model, part, target)
         scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
+        gone = sorted(n for n in scope if self._inference.observation(n).gone)
+        if gone and origin is Origin.USER:  # refused as a whole: nothing is changed
+            why = "; ".join(f"{n} is not reachable ({self._inference.observation(n).gone})" for n in gone)
+            return self._refuse(part, description, why)
+        request = Request(part, target, description, origin, self.clock.now(), withdraw=self._withdraw)
+        # A rule's or recovery's request follows its own log line: the start is detail then.
+        (log.info if origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id, description,
+                                                           origin.value)
         for execution in list(self._executions.values()):
             if execution.scope & scope or execution.request.part == part:
                 self.finish(execution, False, f"preempted by request #{request.id} ({description})")
@@ -517,12 +524,15 @@ class ModeManager:
 
     def _divergence_changed(self, part: str, old: Divergence | None, new: Divergence | None, now: float) -> None:
         if new is None:
+            self._reported.discard(part)
             self._reactions.back_on_target(part, now)
             self._emit(EventKind.DIVERGENCE, part, f"{part} is back on target {self._inference.target(part)}")
             return
-        if new.is_error and (old is None or not old.is_error):
-            log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s: %s).",
-                        part, new.target, new.actual, new.cause.value, new.reason)
+        if new.is_error and part not in self._reported:  # once per divergence, not per attempt
+            self._reported.add(part)
+            why = f": {new.reason}" if new.reason else ""
+            log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s%s).",
+                        part, new.target, new.actual, new.cause.value, why)
         self._emit(EventKind.DIVERGENCE, part, str(new), divergence=new)
 
     def _schedule_grace(self) -> None:

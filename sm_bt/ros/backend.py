@@ -313,7 +313,8 @@ class RosBackend:
                 peer.presence, peer.lifecycle, peer.state, peer.gone = _Presence.PRESENT, lifecycle, state, ""
                 peer.last_heard = peer.last_probe = self._clock.now()
                 later = dict(peer.buffered_parameters)
-            log.info("node %s appeared: %s%s", peer.fqn, state.label, "" if lifecycle else " (parameters only)")
+            # DEBUG: the manager logs the node appearing (one line per event at INFO).
+            log.debug("node %s appeared: %s%s", peer.fqn, state.label, "" if lifecycle else " (parameters only)")
             report = NodeReport(state, values, lifecycle)
             self._dispatch(lambda: listener.node_appeared(peer.part, report))
             if later:
@@ -381,7 +382,7 @@ class RosBackend:
             peer.presence, peer.state, peer.probe, peer.gone = _Presence.ABSENT, State.UNKNOWN, None, reason
             calls = list(peer.calls)
             listener = self._listener
-        log.warning("node %s vanished: %s", peer.fqn, reason)
+        log.debug("node %s vanished: %s", peer.fqn, reason)  # the manager logs it (WARNING)
         if listener is not None:
             self._dispatch(lambda: listener.node_vanished(peer.part, reason))
         for call in calls:

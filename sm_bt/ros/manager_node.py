@@ -15,10 +15,32 @@ real start state or mode and a timestamp (ROS time, nanoseconds), and every topi
 ``change_state`` answer ``success`` for an *accepted* request; confirmation comes as
 ``mode_event``/``transition_event`` (or through the behaviours). The same engine serves the
 behaviours of a mission tree in the same process.
+
+What goes on each topic:
+
+* ``mode_event``: one message per change of the part's actual mode, as the reference's clients
+  read it (a node's ``mode_event`` means "active in this mode"): published only when the part is
+  ``active`` with a mode that differs from the last one published; ``start_mode`` is that last
+  mode (empty only for a part's first event). States with no mode (inactive, activating without
+  a mode, unknown) publish nothing here; ``transition_event`` and ``get_mode`` show them.
+* ``transition_event`` (systems): every change of the inferred state, start = the state before.
+* ``transition_request_info``: when a target changes state, or a transition is asked of the part:
+  the transition (id and label), the state it starts from and the target's state. It goes out
+  *before* ``mode_request_info`` (the reference's monitor takes a goal ``active`` there as
+  ``__DEFAULT__``, and the mode request that follows corrects it).
+* ``mode_request_info``: when the target is active: the part's mode before (empty when none) and
+  the target mode.
+
+Every service callback answers, whatever happens: an empty mode name (``__DEFAULT__`` names the
+default mode), an unknown part, mode or transition, or an internal error give ``success=false``
+and one log line. Log lines go through Python :mod:`logging` (``sm_bt.ros.manager_node``): silent
+unless the application configures logging (``sm-bt manager`` does, on stderr).
 """
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Callable
 from typing import Any
 
 from lifecycle_msgs.msg import State as StateMsg
@@ -32,10 +54,11 @@ from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 
 from sm_bt.engine.events import Event, EventKind, Subscription
 from sm_bt.engine.inference import Actual
-from sm_bt.engine.lifecycle import PlanError, plan
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import SystemPart
+from sm_bt.model.types import DEFAULT_MODE, SystemPart
+
+log = logging.getLogger("sm_bt.ros.manager_node")
 
 #: Latched: a subscriber that joins late still gets the last message.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -44,6 +67,7 @@ SYSTEM_STATES = (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE)
 
 
 def _mode_label(actual: Actual) -> str:
+    """``get_mode``'s answer: the mode, ``""`` when there is none, ``unknown`` while the state is."""
     if not actual.known:
         return "unknown"
     return actual.mode or ""
@@ -55,14 +79,13 @@ class ModeManagerServer:
     def __init__(self, node: Node, manager: ModeManager) -> None:
         self._node = node
         self._manager = manager
-        self._log = node.get_logger()
         self._services: list[Any] = []
         self._publishers: list[Any] = []
         self._mode_events: dict[str, Any] = {}
         self._transition_events: dict[str, Any] = {}
         self._mode_requests: dict[str, Any] = {}
         self._transition_requests: dict[str, Any] = {}
-        # The last published values, so each event carries its real start.
+        # The last published values, so each event carries its real start (and none repeats).
         self._modes: dict[str, str] = {}
         self._states: dict[str, State] = {}
         for name, part in manager.model.parts.items():
@@ -90,7 +113,8 @@ class ModeManagerServer:
         base = "/" + part.lstrip("/")
         node = self._node
 
-        def service(kind: Any, name: str, callback: Any) -> None:
+        def service(kind: Any, name: str, answer: Callable[[Any, Any], Any]) -> None:
+            callback = _never_raising(f"{base}/{name}", answer, _failure_response(kind))
             self._services.append(node.create_service(kind, f"{base}/{name}", callback))
 
         def publisher(kind: Any, name: str) -> Any:
@@ -113,24 +137,32 @@ class ModeManagerServer:
     # -- services (executor thread) --------------------------------------------------------------------
 
     def _change_mode(self, part: str, request: Any, response: Any) -> Any:
-        self._log.info(f"-> callback change_mode of {part} to {request.mode_name}")
-        handle = self._manager.change_mode(part, request.mode_name)
+        mode = request.mode_name
+        log.debug("-> callback change_mode of %s to %r", part, mode)
+        if not mode:
+            # The reference answers false; never read "" as the default mode (nothing is touched).
+            log.warning("change_mode of %s refused: the mode name is empty (name a mode; %s names the "
+                        "default mode)", part, DEFAULT_MODE)
+            response.success = False
+            return response
+        handle = self._manager.change_mode(part, mode)
         response.success = not (handle.done and not handle.succeeded)
-        if not response.success:
-            self._log.error(f"mode change of {part} to {request.mode_name!r} refused: {handle.reason}")
+        if not response.success:  # the manager has logged why (WARNING)
+            log.debug("<- change_mode of %s to %r answered false: %s", part, mode, handle.reason)
         return response
 
     def _change_state(self, part: str, request: Any, response: Any) -> Any:
         transition: str | int = request.transition.label or int(request.transition.id)
-        self._log.info(f"-> request for transition of {part}: {transition}")
+        log.debug("-> callback change_state of %s: %s", part, transition)
         handle = self._manager.change_state(part, transition)
         response.success = not (handle.done and not handle.succeeded)
-        if not response.success:
-            self._log.error(f"transition {transition} of {part} refused: {handle.reason}")
+        if not response.success:  # the manager has logged why (WARNING)
+            log.debug("<- change_state of %s (%s) answered false: %s", part, transition, handle.reason)
         return response
 
     def _get_mode(self, part: str, response: Any) -> Any:
         response.current_mode = _mode_label(self._manager.actual(part))
+        log.debug("-> callback get_mode of %s: %s", part, response.current_mode)
         return response
 
     def _get_available_modes(self, part: str, response: Any) -> Any:
@@ -138,7 +170,9 @@ class ModeManagerServer:
         return response
 
     def _get_state(self, part: str, response: Any) -> Any:
-        response.current_state = _state_message(self._manager.actual(part).state)
+        state = self._manager.actual(part).state
+        response.current_state = _state_message(state)
+        log.debug("-> callback get_state of %s: %s", part, state.label)
         return response
 
     @staticmethod
@@ -146,44 +180,83 @@ class ModeManagerServer:
         response.available_states = [_state_message(state) for state in SYSTEM_STATES]
         return response
 
-    # -- topics (the thread of the manager's event) ----------------------------------------------------
+    # -- topics (the thread of the manager's event, inside its lock) -------------------------------------
 
     def _on_event(self, event: Event) -> None:
         if event.kind is EventKind.ACTUAL and event.actual is not None:
             self._publish_actual(event.part, event.actual)
         elif event.kind is EventKind.TARGET and event.target is not None:
-            self._publish_request(event.part, event.target, event.actual)
+            self._publish_request(event, event.target)
 
     def _publish_actual(self, part: str, actual: Actual) -> None:
-        stamp = self._stamp()
-        mode = _mode_label(actual)
-        previous_mode = self._modes.get(part)
-        if mode != previous_mode:
-            self._modes[part] = mode
-            self._mode_events[part].publish(_mode_event(stamp, previous_mode or "", mode))
+        # mode_event: only a new mode the part is active in (a reference client reads every
+        # mode_event as "active in goal_mode"); start is the last mode published.
+        if actual.state is State.ACTIVE and actual.mode:
+            last = self._modes.get(part)
+            if actual.mode != last:
+                self._modes[part] = actual.mode
+                self._mode_events[part].publish(_mode_event(self._stamp(), last or "", actual.mode))
         if part in self._transition_events:
-            previous_state = self._states.get(part, State.UNKNOWN)
-            if actual.state is not previous_state or part not in self._states:
-                self._states[part] = actual.state
-                event = TransitionEvent(timestamp=stamp, start_state=_state_message(previous_state),
+            # A system's every change of state; the first known state starts from unknown.
+            previous = self._states.get(part, State.UNKNOWN)
+            self._states[part] = actual.state
+            if actual.state is not previous:
+                event = TransitionEvent(timestamp=self._stamp(), start_state=_state_message(previous),
                                         goal_state=_state_message(actual.state))
                 self._transition_events[part].publish(event)
 
-    def _publish_request(self, part: str, target: StateMode, actual: Actual | None) -> None:
-        stamp = self._stamp()
-        current = actual.state if actual is not None else State.UNKNOWN
+    def _publish_request(self, event: Event, target: StateMode) -> None:
+        part = event.part
+        before = event.previous if event.previous is not None else event.actual
+        start = before.state if before is not None else State.UNKNOWN
+        # First the state (a reference monitor reads a goal "active" there as __DEFAULT__), then
+        # the mode, which corrects it.
+        if event.transition is not None or target.state is not start:
+            message = TransitionEvent(timestamp=self._stamp(), start_state=_state_message(start),
+                                      goal_state=_state_message(target.state))
+            if event.transition is not None:
+                message.transition = TransitionMsg(id=int(event.transition), label=event.transition.label)
+            self._transition_requests[part].publish(message)
         if target.state is State.ACTIVE:
-            start = _mode_label(actual) if actual is not None else ""
-            self._mode_requests[part].publish(_mode_event(stamp, start, target.mode or ""))
-        event = TransitionEvent(timestamp=stamp, start_state=_state_message(current),
-                                goal_state=_state_message(target.state))
-        step = _first_step(current, target.state)
-        if step is not None:
-            event.transition = TransitionMsg(id=int(step), label=step.label)
-        self._transition_requests[part].publish(event)
+            start_mode = (before.mode if before is not None else None) or ""
+            self._mode_requests[part].publish(_mode_event(self._stamp(), start_mode, _target_mode(target)))
 
     def _stamp(self) -> int:
         return int(self._node.get_clock().now().nanoseconds)
+
+
+def _target_mode(target: StateMode) -> str:
+    return target.mode or DEFAULT_MODE
+
+
+def _never_raising(name: str, answer: Callable[[Any, Any], Any],
+                   failed: Callable[[Any], None]) -> Callable[[Any, Any], Any]:
+    """``answer`` as a service callback that always answers: an exception escaping an rclpy
+    callback would stop the executor, and with it the whole manager."""
+
+    def callback(request: Any, response: Any) -> Any:
+        try:
+            return answer(request, response)
+        except Exception:
+            log.exception("%s failed on %s", name, request)
+            failed(response)
+            return response
+
+    return callback
+
+
+def _failure_response(kind: Any) -> Callable[[Any], None]:
+    """What a failed call of a ``kind`` service answers (``success=false``, or ``unknown``)."""
+
+    def fill(response: Any) -> None:
+        if kind is ChangeMode or kind is ChangeState:
+            response.success = False
+        elif kind is GetMode:
+            response.current_mode = "unknown"
+        elif kind is GetState:
+            response.current_state = _state_message(State.UNKNOWN)
+
+    return fill
 
 
 def _state_message(state: State) -> Any:
@@ -192,14 +265,3 @@ def _state_message(state: State) -> Any:
 
 def _mode_event(stamp: int, start: str, goal: str) -> Any:
     return ModeEvent(timestamp=stamp, start_mode=Mode(label=start), goal_mode=Mode(label=goal))
-
-
-def _first_step(start: State, goal: State) -> Any:
-    """The first transition from ``start`` towards ``goal``, when both are primary and differ."""
-    if not (start.is_primary and goal.is_primary) or start is goal:
-        return None
-    try:
-        steps = plan(start, goal)
-    except PlanError:
-        return None
-    return steps[0].transition if steps else None
