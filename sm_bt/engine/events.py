@@ -1,10 +1,11 @@
-"""What the manager tells its observers, and the divergence record."""
+"""What the manager tells its observers (events, in order, through an outbox), and the divergence record."""
 
 from __future__ import annotations
 
 import enum
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from sm_bt.engine.inference import Actual
 from sm_bt.engine.lifecycle import Transition
@@ -96,3 +97,39 @@ class Subscription:
 
     def cancel(self) -> None:
         self._remove(self)
+
+
+class Outbox:
+    """Events waiting to be told, in order. A part's actual changes that pile up before they are
+    told become one event (first old value, last new value; none if they cancel out), so
+    observers never see the intermediate inferences of one settling."""
+
+    def __init__(self) -> None:
+        self._queue: deque[list[Event | None]] = deque()
+        self._actual: dict[str, list[Event | None]] = {}  # part -> its untold ACTUAL event's slot
+
+    def put(self, event: Event) -> None:
+        self._queue.append([event])
+
+    def actual(self, event: Event) -> None:
+        slot = self._actual.get(event.part)
+        told = slot[0] if slot is not None else None
+        if told is None:
+            slot = [event]
+            self._actual[event.part] = slot
+            self._queue.append(slot)
+            return
+        assert slot is not None
+        merged = replace(told, actual=event.actual, time=event.time,
+                         message=f"{event.part}: {told.previous} -> {event.actual}")
+        slot[0] = None if merged.previous == merged.actual else merged
+
+    def pop(self) -> Event | None:
+        while self._queue:
+            slot = self._queue.popleft()
+            event = slot[0]
+            if event is not None and self._actual.get(event.part) is slot:
+                del self._actual[event.part]
+            if event is not None:
+                return event
+        return None

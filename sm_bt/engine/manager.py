@@ -31,13 +31,12 @@ import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import replace
 
 from sm_bt.engine.backend import Backend, CallResult, Done, NodeReport
 from sm_bt.engine.clock import TimerHandle
 from sm_bt.engine.divergences import Divergences
 from sm_bt.engine.drivers import NodeDriver
-from sm_bt.engine.events import Divergence, Event, EventKind, Observer, Subscription
+from sm_bt.engine.events import Divergence, Event, EventKind, Observer, Outbox, Subscription
 from sm_bt.engine.executions import Execution
 from sm_bt.engine.hierarchy import Hierarchy, implied_targets
 from sm_bt.engine.inference import Actual, Changes, Inference, NodeObservation
@@ -93,7 +92,7 @@ class ModeManager:
         self._last_mode: dict[str, str] = {}  # the last active mode asked for, kept over deactivation
         self._reported: set[str] = set()  # divergences already logged as errors
         self._agenda: deque[Callable[[], None]] = deque()
-        self._outbox = _Outbox()
+        self._outbox = Outbox()
         self._subscriptions: list[Subscription] = []
         self._depth = 0
         self._grace_timer: TimerHandle | None = None
@@ -604,42 +603,6 @@ class ModeManager:
     def _mode_for_activation(self, part: str) -> str:
         """Activation keeps the mode last asked for (the reference falls back to the default)."""
         return self._last_mode.get(part, self.model.parts[part].default_mode)
-
-
-class _Outbox:
-    """Events waiting to be told, in order. A part's actual changes that pile up before they are
-    told become one event (first old value, last new value; none if they cancel out), so
-    observers never see the intermediate inferences of one settling."""
-
-    def __init__(self) -> None:
-        self._queue: deque[list[Event | None]] = deque()
-        self._actual: dict[str, list[Event | None]] = {}  # part -> its untold ACTUAL event's slot
-
-    def put(self, event: Event) -> None:
-        self._queue.append([event])
-
-    def actual(self, event: Event) -> None:
-        slot = self._actual.get(event.part)
-        told = slot[0] if slot is not None else None
-        if told is None:
-            slot = [event]
-            self._actual[event.part] = slot
-            self._queue.append(slot)
-            return
-        assert slot is not None
-        merged = replace(told, actual=event.actual, time=event.time,
-                         message=f"{event.part}: {told.previous} -> {event.actual}")
-        slot[0] = None if merged.previous == merged.actual else merged
-
-    def pop(self) -> Event | None:
-        while self._queue:
-            slot = self._queue.popleft()
-            event = slot[0]
-            if event is not None and self._actual.get(event.part) is slot:
-                del self._actual[event.part]
-            if event is not None:
-                return event
-        return None
 
 
 class _DriverIO:
