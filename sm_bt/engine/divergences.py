@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from sm_bt.engine.events import Cause, Divergence
 from sm_bt.engine.hierarchy import Hierarchy
 from sm_bt.engine.inference import Inference
+from sm_bt.engine.requests import Origin
 from sm_bt.model.types import Model, SystemPart
 
 #: Clock slack: a timer set for ``since + grace`` must find the grace period over when it fires.
@@ -50,7 +51,7 @@ class Divergences:
         self._since: dict[str, float] = {}
         self._busy: dict[str, int] = {}  # (request, node) pairs in flight at or below each part
         self._faulty: set[str] = set()  # off target by itself, or with a fault below
-        self._retargeted: set[str] = set()  # parts whose target a rule set directly
+        self._chosen: dict[str, Origin] = {}  # who set a part's target for it (not through a system above)
         self._notes: dict[str, str] = {}  # what the manager adds to the reason (recovery gave up)
         self._dirty: set[str] = set()
         self._grace: list[tuple[float, str]] = []  # (due, part), a heap; stale entries are skipped
@@ -79,17 +80,17 @@ class Divergences:
     def is_busy(self, part: str) -> bool:
         return self._busy.get(part, 0) > 0
 
-    def retargeted(self, part: str, by_rule: bool) -> None:
-        """Whether ``part``'s target was last set by one of its rules (rather than by a request
-        for it or for a system above it)."""
-        if by_rule:
-            self._retargeted.add(part)
+    def chosen(self, part: str, origin: Origin | None) -> None:
+        """Who last set ``part``'s target for the part itself (a user, or one of its rules);
+        ``None`` when it came with the target of a system above."""
+        if origin is None:
+            self._chosen.pop(part, None)
         else:
-            self._retargeted.discard(part)
+            self._chosen[part] = origin
         self.touch(part)
 
-    def is_retargeted(self, part: str) -> bool:
-        return part in self._retargeted
+    def chosen_by(self, part: str) -> Origin | None:
+        return self._chosen.get(part)
 
     def note(self, part: str, text: str | None) -> None:
         if text is None:
@@ -146,7 +147,7 @@ class Divergences:
         on_target = target is None or (actual.known and actual.state_mode == target)
         spec = self._model.parts[part]
         if isinstance(spec, SystemPart):
-            faulty = any(c in self._faulty or c in self._retargeted for c in spec.parts)
+            faulty = any(c in self._faulty or self._chosen.get(c) is Origin.RULE for c in spec.parts)
         else:
             faulty = not on_target
         if faulty:

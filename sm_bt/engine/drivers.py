@@ -107,6 +107,12 @@ class NodeDriver:
         """A (new) process of the node was reported: nothing from the old one is awaited."""
         self._leaving = None
 
+    def state_reported(self, state: State) -> None:
+        """The node reported ``state``: a transition answered earlier has now shown in its reports.
+        (Kept whether or not a step owns the node: a later owner must not wait for it.)"""
+        if state is not self._leaving:
+            self._leaving = None
+
     # -- progress -------------------------------------------------------------------------------
 
     def advance(self) -> None:
@@ -200,7 +206,10 @@ class NodeDriver:
             if self.call is not call:
                 return
             self.call = None
-            self._leaving = start if result.ok else None
+            # Answered with success while the reports still show the start state: the reports of
+            # the move are yet to come (state_reported clears it).
+            reported = self.io.observation(self.node).state
+            self._leaving = start if result.ok and reported is start else None
             self._answered(call, result)
 
         self.io.send_transition(self.node, transition, done)

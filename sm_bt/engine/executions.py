@@ -8,7 +8,7 @@ from typing import Protocol
 from sm_bt.engine.clock import TimerHandle
 from sm_bt.engine.drivers import NodeDriver
 from sm_bt.engine.plans import Sequence, Step, build_plan
-from sm_bt.engine.requests import Request
+from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.states import StateMode
 from sm_bt.model.types import Model
 
@@ -32,7 +32,7 @@ class Execution:
     replaced (restored if it is withdrawn)."""
 
     def __init__(self, host: Host, request: Request, scope: frozenset[str],
-                 previous_targets: dict[str, tuple[StateMode | None, bool]]) -> None:
+                 previous_targets: dict[str, tuple[StateMode | None, Origin | None]]) -> None:
         self.host = host
         self.request = request
         self.scope = scope

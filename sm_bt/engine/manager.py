@@ -274,6 +274,7 @@ class ModeManager:
     def _node_state(self, node: str, state: State) -> None:
         with self._entry():
             self._apply(self._inference.node_state(node, state))
+            self._drivers[node].state_reported(state)
             self._drivers[node].advance()
 
     def _node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> None:
@@ -361,15 +362,17 @@ class ModeManager:
         return request
 
     def _assign_targets(self, implied: list[tuple[str, StateMode]], origin: Origin,
-                        transition: Transition | None) -> dict[str, tuple[StateMode | None, bool]]:
+                        transition: Transition | None) -> dict[str, tuple[StateMode | None, Origin | None]]:
         """Set the targets (the requested part first, then top-down below it); return what they
-        were, with whether a rule had set them."""
-        previous: dict[str, tuple[StateMode | None, bool]] = {}
+        were, with who had chosen them."""
+        previous: dict[str, tuple[StateMode | None, Origin | None]] = {}
         for index, (name, value) in enumerate(implied):
-            previous[name] = (self._inference.target(name), self._divergences.is_retargeted(name))
+            previous[name] = (self._inference.target(name), self._divergences.chosen_by(name))
             self._set_target(name, value, transition if index == 0 else None)
-            if index > 0 or origin is not Origin.RECOVERY:  # restoring a node keeps who chose its target
-                self._divergences.retargeted(name, index == 0 and origin is Origin.RULE)
+            if index > 0:
+                self._divergences.chosen(name, None)
+            elif origin is not Origin.RECOVERY:  # restoring a node keeps who chose its target
+                self._divergences.chosen(name, origin)
         return previous
 
     def _set_target(self, part: str, target: StateMode | None, transition: Transition | None = None) -> None:
@@ -417,9 +420,9 @@ class ModeManager:
             execution = self._executions.get(request.id)
             if execution is None:
                 return
-            for part, (target, by_rule) in execution.previous_targets.items():
+            for part, (target, chosen_by) in execution.previous_targets.items():
                 self._set_target(part, target)
-                self._divergences.retargeted(part, by_rule)
+                self._divergences.chosen(part, chosen_by)
             self.finish(execution, False, "cancelled")
 
     def _timed_out(self, execution: Execution, limit: float) -> None:
@@ -433,7 +436,7 @@ class ModeManager:
     # -- reactions --------------------------------------------------------------------------------
 
     def _react(self, faults: list[Divergence]) -> None:
-        for action in self._reactions.decide(faults, self._inference):
+        for action in self._reactions.decide(faults, _ReactionView(self)):
             if isinstance(action, FireRule):
                 rule = action.rule
                 message = f"rule {rule.name}: {rule.if_part} is {rule.if_part_state} -> {rule.new_target}"
@@ -603,6 +606,16 @@ class ModeManager:
     def _mode_for_activation(self, part: str) -> str:
         """Activation keeps the mode last asked for (the reference falls back to the default)."""
         return self._last_mode.get(part, self.model.parts[part].default_mode)
+
+
+class _ReactionView:
+    """The manager as rules and recovery see it."""
+
+    def __init__(self, manager: ModeManager) -> None:
+        self.actual = manager._inference.actual
+        self.target = manager._inference.target
+        self.observation = manager._inference.observation
+        self.chosen_by = manager._divergences.chosen_by
 
 
 class _DriverIO:

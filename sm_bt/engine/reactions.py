@@ -24,6 +24,7 @@ from sm_bt.engine.divergences import EPSILON
 from sm_bt.engine.events import Divergence
 from sm_bt.engine.hierarchy import Hierarchy
 from sm_bt.engine.inference import Actual, NodeObservation
+from sm_bt.engine.requests import Origin
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model, NodePart, Rule
 
@@ -34,6 +35,9 @@ class View(Protocol):
     def target(self, part: str) -> StateMode | None: ...
 
     def observation(self, node: str) -> NodeObservation: ...
+
+    def chosen_by(self, part: str) -> Origin | None:
+        """Who set the part's target for the part itself (``None``: it came from a system above)."""
 
 
 @dataclass(frozen=True)
@@ -129,9 +133,26 @@ class Reactions:
     def _matching_rule(self, divergence: Divergence, view: View) -> Rule | None:
         for rule in self._model.parts[divergence.part].rules:
             condition = view.actual(rule.if_part)
-            if rule.if_target == divergence.target and condition.known and condition.state_mode == rule.if_part_state:
+            if rule.if_target == divergence.target and condition.known and condition.state_mode == rule.if_part_state \
+                    and not self._users_choice(rule, view):
                 return rule
         return None
+
+    def _users_choice(self, rule: Rule, view: View) -> bool:
+        """The rule's condition holds because a user asked for it: its part is where its target
+        says, and a user chose that target (for the part, or for a system between it and the
+        rule's system). A rule never fires against that."""
+        part = rule.if_part
+        target, actual = view.target(part), view.actual(part)
+        if target is None or not (actual.known and actual.state_mode == target):
+            return False
+        height = self._hierarchy.height
+        for chooser in (part, *self._hierarchy.ancestors[part]):
+            if chooser == rule.system or height[chooser] >= height[rule.system]:
+                break
+            if view.chosen_by(chooser) is Origin.USER:
+                return True
+        return False
 
     def _attempt(self, divergence: Divergence, what: str) -> int | GiveUp:
         """The number of this attempt, or the decision to give up ``what`` (the budget is used)."""
