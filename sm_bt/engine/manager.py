@@ -514,12 +514,12 @@ class ModeManager:
             while self._agenda:
                 self._agenda.popleft()()
             if not self._divergences.pending:
+                self._schedule_grace()
                 return
             now = self.clock.now()
             changes, faults = self._divergences.evaluate(now)
             for change in changes:
                 self._divergence_changed(change.part, change.old, change.new, now)
-            self._schedule_grace()
             if faults:
                 self._react(faults)
         log.error("the manager did not settle after %d passes; stopped to stay responsive", _MAX_PASSES)
@@ -538,6 +538,8 @@ class ModeManager:
         self._emit(EventKind.DIVERGENCE, part, str(new), divergence=new)
 
     def _schedule_grace(self) -> None:
+        """One timer, for the earliest grace period still running (a timer that fires for a grace
+        period that ended early leaves the next one to be scheduled here, after settling)."""
         due = self._divergences.next_due()
         if due is None or (self._grace_due is not None and self._grace_due <= due):
             return
