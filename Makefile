@@ -36,6 +36,14 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 	$(MAKE) --no-print-directory lint
 
+# The manager's property tests (tests/test_manager_properties.py) with the hypothesis `stress`
+# profile: at least 10,000 scenarios, then a summary (requests by outcome, recoveries, rules, ...).
+.PHONY: stress
+stress: $(STAMP)
+	@mkdir -p $(ROS_LOG_DIR)
+	SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests $(BIN)/python -m pytest -q -p stress_summary \
+		tests/test_manager_properties.py
+
 # mypy cannot follow the editable install's mapping of behaviours/ and trees/ onto sm_bt.*, so it
 # checks a symlinked view of the installed layout (build/typecheck/sm_bt).
 TYPECHECK := build/typecheck

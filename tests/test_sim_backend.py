@@ -337,3 +337,139 @@ def test_events_read_as_a_narrative() -> None:
     assert lines[0].split() == ["0.000", "amcl", "request", "change_state", "configure", "(1)"]
     assert lines[2].endswith("on_configure_success (10): configuring -> inactive")
     assert lines[3].endswith("configure: ok")
+
+
+# -- initial state by label (issue 10, item 5) -----------------------------------------------------
+
+
+def test_initial_state_by_label_for_all_or_per_node() -> None:
+    backend, _ = attached(initial_state="active")
+    assert [backend.node(n).state for n in backend.nodes] == [S.ACTIVE, S.ACTIVE]
+    # Started in the default mode's parameters, as with a State.
+    assert backend.node("laser_resender").parameters == {"node_name": "laser_resender"}
+    backend = SimBackend(pilot_model(), initial_state={"amcl": "inactive", "laser_resender": S.ACTIVE})
+    assert [backend.node(n).state for n in backend.nodes] == [S.INACTIVE, S.ACTIVE]
+
+
+@pytest.mark.parametrize("bad", ["configuring", "ACTIVE", "running", S.ERRORPROCESSING])
+def test_initial_state_label_must_be_a_primary_state(bad: State | str) -> None:
+    for initial_state in (bad, {"amcl": bad}):
+        with pytest.raises(ValueError, match="unconfigured, inactive, active, finalized"):
+            SimBackend(pilot_model(), initial_state=initial_state)
+
+
+def test_restart_takes_a_label_too() -> None:
+    backend, _ = attached()
+    backend.restart("amcl", "active")
+    assert backend.node("amcl").state is S.ACTIVE
+    with pytest.raises(ValueError, match="primary"):
+        backend.restart("amcl", "activating")
+
+
+# -- plain (parameter-only) nodes ------------------------------------------------------------------
+
+
+def test_plain_node_appears_active_without_lifecycle() -> None:
+    backend = SimBackend(pilot_model(), plain=("laser_resender",))
+    assert backend.is_plain("laser_resender") and not backend.is_plain("amcl")
+    recorder = Recorder()
+    backend.attach(backend.nodes, recorder)
+    assert recorder.reports == [
+        ("appeared", "amcl", NodeReport(S.UNCONFIGURED, backend.node("amcl").parameters)),
+        ("appeared", "laser_resender", NodeReport(S.ACTIVE, {"node_name": "laser_resender"}, lifecycle=False)),
+    ]
+
+
+def test_plain_node_runs_active_whatever_one_initial_state_says() -> None:
+    backend = SimBackend(pilot_model(), initial_state="inactive", plain=["laser_resender"])
+    assert backend.node("laser_resender").state is S.ACTIVE and backend.node("amcl").state is S.INACTIVE
+    with pytest.raises(ValueError, match="no lifecycle services"):
+        SimBackend(pilot_model(), initial_state={"laser_resender": "inactive"}, plain=["laser_resender"])
+    with pytest.raises(ValueError, match=r"plain names unknown nodes \['ghost'\]"):
+        SimBackend(pilot_model(), plain=["ghost"])
+
+
+def test_plain_node_sets_parameters_and_refuses_transitions_through_the_clock() -> None:
+    backend, recorder = attached(plain=("laser_resender",))
+    results: list[CallResult] = []
+    backend.set_parameters("laser_resender", {"node_name": "other"}, results.append)
+    backend.change_state("laser_resender", T.DEACTIVATE, results.append)
+    assert results == []  # never from inside the call
+    backend.clock.run_pending()
+    assert results == [CallResult(False, "node laser_resender has no lifecycle services (parameters only): "
+                                         "it cannot deactivate")]
+    backend.clock.advance(1.0)
+    assert results[1:] == [CallResult(True)]
+    assert recorder.about("laser_resender") == [("parameters", {"node_name": "other"})]
+    assert backend.node("laser_resender").state is S.ACTIVE and backend.node("laser_resender").transitions == []
+
+
+def test_plain_node_refuses_lifecycle_faults_but_takes_the_others() -> None:
+    backend, recorder = attached(plain=("laser_resender",))
+    for arm in (lambda: backend.fail_next("laser_resender", T.ACTIVATE),
+                lambda: backend.hang_next("laser_resender", T.ACTIVATE),
+                lambda: backend.trigger("laser_resender", T.DEACTIVATE)):
+        with pytest.raises(ValueError, match="laser_resender: it has no lifecycle services"):
+            arm()
+    backend.reject_parameters("laser_resender", "read-only")
+    backend.set_parameter("laser_resender", "node_name", "x")
+    backend.crash("laser_resender")
+    backend.clock.advance(2.0)
+    assert recorder.about("laser_resender")[-1][0] == "vanished"
+    with pytest.raises(ValueError, match="runs active"):
+        backend.restart("laser_resender", S.INACTIVE)
+    backend.restart("laser_resender")
+    assert recorder.about("laser_resender")[-1] == (
+        "appeared", NodeReport(S.ACTIVE, {"node_name": "laser_resender"}, lifecycle=False))
+
+
+# -- helpers for long runs: hung nodes, disarming faults -------------------------------------------
+
+
+def test_hung_lists_nodes_stuck_in_a_hanging_transition_until_restart() -> None:
+    backend, _ = attached()
+    backend.hang_next("amcl", T.CONFIGURE)
+    assert backend.hung() == ()
+    backend.change_state("amcl", T.CONFIGURE, lambda _: None)
+    backend.set_parameters("amcl", {"alpha1": 0.1}, lambda _: None)
+    assert backend.in_flight("amcl") == ("configure", "set_parameters")  # sent, not yet answered
+    backend.clock.advance(5.0)
+    assert backend.hung() == ("amcl",) and backend.node("amcl").state is S.CONFIGURING
+    assert backend.in_flight("amcl") == ("configure",)
+    backend.restart("amcl")
+    assert backend.hung() == () and backend.in_flight("amcl") == ()
+
+
+def test_clear_faults_disarms_what_was_not_used() -> None:
+    backend, _ = attached()
+    backend.fail_next("amcl", T.CONFIGURE)
+    backend.hang_next("laser_resender", T.CONFIGURE)
+    backend.reject_parameters("amcl", "no")
+    backend.clear_faults()
+    results: list[CallResult] = []
+    for node in backend.nodes:
+        backend.change_state(node, T.CONFIGURE, results.append)
+    backend.set_parameters("amcl", {"alpha1": 0.1}, results.append)
+    backend.clock.advance(1.0)
+    assert results == [CallResult(True)] * 3
+    assert [e.details for e in backend.events if e.kind is EventKind.FAULT][-2:] == [
+        "cleared: armed faults disarmed", "cleared: armed faults disarmed"]
+
+
+def test_a_call_made_when_restart_fails_the_old_ones_reaches_the_new_process() -> None:
+    # Found by the manager's property tests: a client that calls again from the failed call's
+    # done() must reach the new process, not be left unanswered on the old one.
+    backend, recorder = attached()
+    results: list[CallResult] = []
+
+    def again(result: CallResult) -> None:
+        results.append(result)
+        backend.set_parameters("amcl", {"alpha1": 0.1}, results.append)
+
+    backend.set_parameters("amcl", {"alpha1": 0.3}, again)
+    backend.crash("amcl")
+    backend.restart("amcl")
+    assert recorder.about("amcl")[-1][0] == "appeared"  # the new process is there before the failure
+    backend.clock.advance(1.0)
+    assert results == [CallResult(False, "node amcl restarted"), CallResult(True)]
+    assert backend.node("amcl").parameters["alpha1"] == 0.1

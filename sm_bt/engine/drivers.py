@@ -61,9 +61,6 @@ class DriverIO(Protocol):
 
     def send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None: ...
 
-    def parameters_accepted(self, node: str, parameters: Mapping[str, ParamValue]) -> None:
-        """A parameter set was answered with success: the node holds these values now."""
-
 
 @dataclass
 class _Call:
@@ -90,13 +87,14 @@ class NodeDriver:
         # After a transition answered with success: its start state, until a report shows the node
         # left it (the answer and the node's state reports may arrive in either order).
         self._leaving: State | None = None
-        self._parameters_set_for: str | None = None  # mode whose set this owner got answered
+        # A parameter set answered with success, until the node's reports show its values: the
+        # answer may come before the parameter events (which alone say what the node holds).
+        self._parameters_set: str | None = None
 
     # -- ownership ------------------------------------------------------------------------------
 
     def assign(self, owner: Owner) -> None:
         self.owner = owner
-        self._parameters_set_for = None
         self.advance()
 
     def release(self, owner: Owner) -> None:
@@ -106,6 +104,7 @@ class NodeDriver:
     def node_appeared(self) -> None:
         """A (new) process of the node was reported: nothing from the old one is awaited."""
         self._leaving = None
+        self._parameters_set = None
 
     def state_reported(self, state: State) -> None:
         """The node reported ``state``: a transition answered earlier has now shown in its reports.
@@ -133,13 +132,12 @@ class NodeDriver:
             return
         self._leaving = None
         goal = owner.goal
-        if goal.state is State.ACTIVE and goal.mode is not None and not goal.mode.matches(obs.parameters):
-            if self._parameters_set_for == goal.mode.name:
-                owner.failed(f"{self.node}: the parameters of mode {goal.mode.name} were accepted but do not "
-                             f"read back as that mode ({self._describe(obs)})")
-                return
-            self._send_parameters(owner, goal.mode)
+        mode = goal.mode if goal.state is State.ACTIVE else None
+        if mode is not None and not mode.matches(obs.parameters):
+            if self._parameters_set != mode.name:  # not sent yet (waiting otherwise)
+                self._send_parameters(owner, mode)
             return
+        self._parameters_set = None
         if obs.state is not goal.state:
             try:
                 path = plan(obs.state, goal.state)
@@ -167,6 +165,8 @@ class NodeDriver:
             return f"{self.node}: waiting while it is {obs.state.label}"
         if obs.state is self._leaving:
             return f"{self.node}: waiting for its state report (still {obs.state.label})"
+        if self._parameters_set is not None:
+            return f"{self.node}: waiting for the parameters of mode {self._parameters_set} to be reported"
         return f"{self.node}: next step towards {owner.goal if owner else 'nothing'}"
 
     def stall(self) -> str:
@@ -190,10 +190,7 @@ class NodeDriver:
             if self.call is not call:
                 return
             self.call = None
-            if result.ok:
-                self.io.parameters_accepted(self.node, values)
-                if self.owner is owner:
-                    self._parameters_set_for = mode.name
+            self._parameters_set = mode.name if result.ok else None
             self._answered(call, result)
 
         self.io.send_parameters(self.node, values, done)

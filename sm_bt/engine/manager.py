@@ -301,10 +301,6 @@ class ModeManager:
         log.debug("  %s: set %d parameters", node, len(parameters))
         self.backend.set_parameters(node, parameters, self._serialised(done))
 
-    def _parameters_accepted(self, node: str, parameters: Mapping[str, ParamValue]) -> None:
-        # The answer already says what the node holds; its parameter events may come later.
-        self._apply(self._inference.node_parameters(node, parameters))
-
     def _serialised(self, done: Done) -> Done:
         def callback(result: CallResult) -> None:
             with self._entry():
@@ -637,9 +633,6 @@ class _DriverIO:
 
     def send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         self._manager._send_parameters(node, parameters, done)
-
-    def parameters_accepted(self, node: str, parameters: Mapping[str, ParamValue]) -> None:
-        self._manager._parameters_accepted(node, parameters)
 
 
 class _Listener:

@@ -10,8 +10,13 @@ Faults are injected from outside (tests, demos) and each one is recorded in :att
 :meth:`~SimBackend.fail_next`, :meth:`~SimBackend.hang_next`, :meth:`~SimBackend.reject_parameters`,
 :meth:`~SimBackend.set_parameter`, :meth:`~SimBackend.trigger`, :meth:`~SimBackend.crash`,
 :meth:`~SimBackend.restart`, :meth:`~SimBackend.start_late`. Armed faults and delay overrides belong to
-the simulation, not to the node process: they survive a restart. Fault methods act at once (their
-reports to the listener come from inside the call); only the Backend requests are deferred.
+the simulation, not to the node process: they survive a restart (:meth:`~SimBackend.clear_faults` disarms
+them). Fault methods act at once (their reports to the listener come from inside the call); only the
+Backend requests are deferred.
+
+Nodes named in ``plain`` have no lifecycle services (parameters only), as a node without
+``rclcpp_lifecycle`` on ROS: they are reported ``active`` with ``lifecycle=False``, accept parameter
+sets, and answer every ``change_state`` with a failure, through the clock like every answer.
 
 The backend is single-threaded: drive it from the thread that advances the clock.
 """
@@ -20,17 +25,22 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
 from sm_bt.engine.clock import TimerHandle, VirtualClock
 from sm_bt.engine.lifecycle import REQUESTABLE, Outcome, Transition
-from sm_bt.model.states import State
+from sm_bt.model.states import PRIMARY_STATES, State
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.sim.node import ParameterRejected, SimNode, TransitionEvent, TransitionRefused
 
 _REQUESTABLE = frozenset(step.transition for step in REQUESTABLE)
+#: The states a node process can start in, in lifecycle order (for messages).
+_STARTABLE = tuple(s for s in State if s in PRIMARY_STATES)
+
+#: A state to start in: a :class:`State` or its label (``"active"``).
+StartState = State | str
 
 
 class NodeStatus(str, enum.Enum):
@@ -89,8 +99,10 @@ class SimBackend:
     """Simulated lifecycle nodes for every node part of ``model``.
 
     Nodes start running in ``initial_state`` (one state for all, or per node; unlisted nodes are
-    unconfigured) with their default mode's parameter values, overridden per node by
-    ``initial_parameters``. Nodes named in ``late`` are not running until that virtual time.
+    unconfigured; a :class:`State` or its label, ``"active"``) with their default mode's parameter
+    values, overridden per node by ``initial_parameters``. Nodes named in ``late`` are not running
+    until that virtual time. Nodes named in ``plain`` have no lifecycle (see the module docstring):
+    they always run ``active``, whatever one ``initial_state`` for all says.
     """
 
     def __init__(
@@ -102,9 +114,10 @@ class SimBackend:
         error_delay: float = 0.05,
         parameter_delay: float = 0.01,
         vanish_after: float = 1.0,
-        initial_state: State | Mapping[str, State] = State.UNCONFIGURED,
+        initial_state: StartState | Mapping[str, StartState] = State.UNCONFIGURED,
         initial_parameters: Mapping[str, Mapping[str, ParamValue]] | None = None,
         late: Mapping[str, float] | None = None,
+        plain: Collection[str] = (),
     ) -> None:
         for label, value in (("transition_delay", transition_delay), ("error_delay", error_delay),
                              ("parameter_delay", parameter_delay), ("vanish_after", vanish_after)):
@@ -119,16 +132,25 @@ class SimBackend:
 
         names = tuple(part.name for part in model.nodes)
         self._declared = {part.name: part.modes[part.default_mode].values() for part in model.nodes}
-        for label, mapping in (("initial_state", initial_state if isinstance(initial_state, Mapping) else {}),
-                               ("initial_parameters", initial_parameters or {}), ("late", late or {})):
+        per_node = initial_state if isinstance(initial_state, Mapping) else {}
+        for label, mapping in (("initial_state", per_node), ("initial_parameters", initial_parameters or {}),
+                               ("late", late or {}), ("plain", dict.fromkeys(plain))):
             unknown = sorted(set(mapping) - set(names))
             if unknown:
                 raise ValueError(f"{label} names unknown nodes {unknown} (nodes: {', '.join(names)})")
-        self._initial_state = {
-            name: (initial_state.get(name, State.UNCONFIGURED) if isinstance(initial_state, Mapping)
-                   else initial_state)
-            for name in names
-        }
+        self._plain = frozenset(plain)
+        common = State.UNCONFIGURED if isinstance(initial_state, Mapping) else \
+            _start_state(initial_state, "initial_state")
+        self._initial_state: dict[str, State] = {}
+        for name in names:
+            if name in per_node:
+                state = _start_state(per_node[name], f"initial_state of node {name}")
+                if name in self._plain and state is not State.ACTIVE:
+                    raise ValueError(f"initial_state of node {name}: it has no lifecycle services (parameters "
+                                     f"only), so it runs active, not {state}")
+            else:
+                state = State.ACTIVE if name in self._plain else common
+            self._initial_state[name] = state
         self._initial_overrides = {name: dict((initial_parameters or {}).get(name, {})) for name in names}
 
         self._nodes: dict[str, SimNode] = {}
@@ -138,6 +160,7 @@ class SimBackend:
         self._delays: dict[tuple[str, Transition | None], float] = {}
         self._failures: dict[tuple[str, Transition], _Failure] = {}
         self._hangs: set[tuple[str, Transition]] = set()
+        self._hung: set[str] = set()  # running nodes stuck in a transition that hangs
         self._parameter_rejections: dict[str, str] = {}
         self._listener: BackendListener | None = None
         self._watched: set[str] = set()
@@ -168,6 +191,21 @@ class SimBackend:
     def status(self, name: str) -> NodeStatus:
         self._require(name)
         return self._status[name]
+
+    def is_plain(self, name: str) -> bool:
+        """True for a node without lifecycle services (parameters only)."""
+        self._require(name)
+        return name in self._plain
+
+    def in_flight(self, name: str) -> tuple[str, ...]:
+        """The calls ``name`` received and has not answered yet, oldest first, by label
+        (``"configure"``, ``"set_parameters"``)."""
+        self._require(name)
+        return tuple(call.label for call in self._pending[name])
+
+    def hung(self) -> tuple[str, ...]:
+        """Running nodes stuck in a transition armed with :meth:`hang_next` (until crash or restart)."""
+        return tuple(name for name in self._nodes if name in self._hung)
 
     # -- Backend protocol ---------------------------------------------------------------------------
 
@@ -215,7 +253,7 @@ class SimBackend:
         """The next requested ``transition`` of ``node`` returns ``outcome`` (FAILURE or ERROR) from its
         callback; after ERROR, ``on_error`` returns ``on_error`` (SUCCESS -> unconfigured, else finalized).
         :meth:`trigger` does not consume it (it brings its own outcome)."""
-        self._require(node)
+        self._require_lifecycle(node, "fail a transition of")
         self._require_requestable(transition)
         if outcome is Outcome.SUCCESS:
             raise ValueError("fail_next needs Outcome.FAILURE or Outcome.ERROR")
@@ -225,7 +263,7 @@ class SimBackend:
     def hang_next(self, node: str, transition: Transition) -> None:
         """The next requested ``transition`` of ``node`` enters its transition state and never leaves it:
         no response comes until the node crashes (then vanishes) or restarts."""
-        self._require(node)
+        self._require_lifecycle(node, "hang a transition of")
         self._require_requestable(transition)
         self._hangs.add((node, transition))
         self._record(node, EventKind.FAULT, f"armed: next {transition.label} hangs")
@@ -261,6 +299,7 @@ class SimBackend:
         laser_resender's failure: ``trigger("laser_resender", Transition.DEACTIVATE, Outcome.ERROR)``
         gives deactivating -> errorprocessing -> unconfigured (events 4, 42, 60)."""
         self._require_running(node, "trigger a transition of")
+        self._require_lifecycle(node, "trigger a transition of")
         try:
             event = self._nodes[node].start(transition)
         except TransitionRefused as error:
@@ -275,18 +314,41 @@ class SimBackend:
         After ``vanish_after`` s it is reported vanished and every pending call fails."""
         self._require_running(node, "crash")
         self._cancel_timers(node)
+        self._hung.discard(node)
         self._status[node] = NodeStatus.CRASHED
         self._record(node, EventKind.FAULT, "crashed: no more answers")
         self._after(node, self.vanish_after, lambda: self._vanish(node))
 
-    def restart(self, node: str, state: State = State.UNCONFIGURED) -> None:
+    def restart(self, node: str, state: StartState | None = None) -> None:
         """A fresh process of ``node`` (running, crashed, vanished or not yet started) starts now in
-        ``state`` with the initial parameter values; calls pending on the old one fail at once."""
+        ``state`` (default: unconfigured; a plain node always starts active) with the initial
+        parameter values; calls pending on the old one fail at once, once the new process is up
+        (so that a client calling again from their ``done`` reaches the new one)."""
         self._require(node)
-        if not state.is_primary:
-            raise ValueError(f"cannot restart node {node} in {state}: a node starts in a primary state")
-        self._stop(node, f"node {node} restarted")
-        self._start(node, state, f"restarted in {state}")
+        plain = node in self._plain
+        default = State.ACTIVE if plain else State.UNCONFIGURED
+        start = default if state is None else _start_state(state, f"cannot restart node {node}:")
+        if plain and start is not State.ACTIVE:
+            raise ValueError(f"cannot restart node {node} in {start}: it has no lifecycle services (parameters "
+                             "only), so it runs active")
+        stale = self._stop(node)
+        self._start(node, start, f"restarted in {start}")
+        self._fail(stale, f"node {node} restarted")
+
+    def clear_faults(self, node: str | None = None) -> None:
+        """Disarm what :meth:`fail_next`, :meth:`hang_next` and :meth:`reject_parameters` armed (for
+        ``node``, or every node) and not yet used; what already happened stays (a hung node stays
+        hung until it restarts)."""
+        nodes = self.nodes if node is None else (node,)
+        for name in nodes:
+            self._require(name)
+            armed = [key for key in self._failures if key[0] == name] + [key for key in self._hangs if key[0] == name]
+            for key in armed:
+                self._failures.pop(key, None)
+                self._hangs.discard(key)
+            if armed or name in self._parameter_rejections:
+                self._parameter_rejections.pop(name, None)
+                self._record(name, EventKind.FAULT, "cleared: armed faults disarmed")
 
     def start_late(self, node: str, at: float) -> None:
         """``node`` is not running until virtual time ``at``; then it starts in its initial state and
@@ -294,9 +356,10 @@ class SimBackend:
         self._require(node)
         if node in self._visible:
             raise ValueError(f"node {node} was already reported running; use crash() and restart()")
-        self._stop(node, f"node {node} is not running")
+        stale = self._stop(node)
         self._status[node] = NodeStatus.NOT_STARTED
         self._record(node, EventKind.FAULT, f"not running until t={at:g}")
+        self._fail(stale, f"node {node} is not running")
         self._after(node, at - self._clock.now(),
                     lambda: self._start(node, self._initial_state[node], f"started late in "
                                                                         f"{self._initial_state[node]}"))
@@ -316,6 +379,11 @@ class SimBackend:
 
     def _deliver_transition(self, call: _Call, transition: Transition) -> None:
         node = call.node
+        if node in self._plain:
+            # The ROS backend's wording (sm_bt.ros.backend), so that both backends read the same.
+            self._respond(call, CallResult(False, f"node {node} has no lifecycle services (parameters only): "
+                                                  f"it cannot {transition.label}"))
+            return
         try:
             event = self._nodes[node].start(transition)
         except TransitionRefused as error:
@@ -324,6 +392,7 @@ class SimBackend:
         self._moved(node, event)
         if (node, transition) in self._hangs:
             self._hangs.discard((node, transition))
+            self._hung.add(node)
             self._record(node, EventKind.FAULT, f"{transition.label} hangs in {event.goal}: no response")
             return
         failure = self._failures.pop((node, transition), _Failure(Outcome.SUCCESS, Outcome.SUCCESS))
@@ -384,7 +453,7 @@ class SimBackend:
     # -- process life -------------------------------------------------------------------------------
 
     def _spawn(self, node: str, state: State) -> SimNode:
-        sim = SimNode(node, self._declared[node], self._clock, state=state)
+        sim = SimNode(node, self._declared[node], self._clock, state=state, lifecycle=node not in self._plain)
         try:
             sim.set_parameters(self._initial_overrides[node])
         except ParameterRejected as error:
@@ -398,10 +467,18 @@ class SimBackend:
         if node in self._watched:
             self._appear(node)
 
-    def _stop(self, node: str, reason: str) -> None:
-        """End the current process without a vanish report: its calls fail with ``reason``."""
+    def _stop(self, node: str) -> list[_Call]:
+        """End the current process without a vanish report; return its unanswered calls, for the
+        caller to fail once the node's new status is in place (a caller's ``done`` may call again
+        at once, and that call must reach the new process, not the old one)."""
         self._cancel_timers(node)
-        self._fail_pending(node, reason)
+        self._hung.discard(node)
+        stale, self._pending[node] = self._pending[node], []
+        return stale
+
+    def _fail(self, calls: list[_Call], reason: str) -> None:
+        for call in calls:
+            self._respond(call, CallResult(False, reason))
 
     def _vanish(self, node: str) -> None:
         self._status[node] = NodeStatus.VANISHED
@@ -423,7 +500,7 @@ class SimBackend:
             return
         sim = self._nodes[node]
         self._visible.add(node)
-        self._listener.node_appeared(node, NodeReport(sim.state, sim.parameters))
+        self._listener.node_appeared(node, NodeReport(sim.state, sim.parameters, lifecycle=sim.lifecycle))
 
     def _moved(self, node: str, event: TransitionEvent) -> None:
         self._record(node, EventKind.TRANSITION, str(event), transition=event)
@@ -463,6 +540,11 @@ class SimBackend:
         if node not in self._nodes:
             raise KeyError(f"no simulated node {node!r} (nodes: {', '.join(self._nodes)})")
 
+    def _require_lifecycle(self, node: str, action: str) -> None:
+        self._require(node)
+        if node in self._plain:
+            raise ValueError(f"cannot {action} node {node}: it has no lifecycle services (parameters only)")
+
     def _require_running(self, node: str, action: str) -> None:
         self._require(node)
         if self._status[node] is not NodeStatus.RUNNING:
@@ -481,6 +563,21 @@ def _transition_result(node: str, transition: Transition, outcome: Outcome, fina
     if outcome is Outcome.ERROR:
         reason += f" (node went to errorprocessing, then {final})"
     return CallResult(False, reason)
+
+
+def _start_state(value: StartState, what: str) -> State:
+    """``value`` as a state a node process can start in; ``ValueError`` naming the valid ones."""
+    valid = ", ".join(state.label for state in _STARTABLE)
+    if isinstance(value, State):
+        state = value
+    else:
+        try:
+            state = State.from_label(value)
+        except ValueError:
+            raise ValueError(f"{what} {value!r} is not a lifecycle state: use one of {valid}") from None
+    if not state.is_primary:
+        raise ValueError(f"{what} {state.label!r} is not a primary state: a node starts in one of {valid}")
+    return state
 
 
 def _check_delay(label: str, seconds: float) -> None:

@@ -72,6 +72,9 @@ class SimNode:
     Parameters are declared with the types of ``parameters`` (the node's default mode values) and
     start with those values. Use :meth:`start`/:meth:`complete` to move through the state machine;
     the clock only stamps the events.
+
+    ``lifecycle=False`` makes a plain node (parameters only, no lifecycle services): it is
+    ``active`` as long as its process runs, and :meth:`start` refuses every transition.
     """
 
     def __init__(
@@ -81,10 +84,15 @@ class SimNode:
         clock: Clock,
         *,
         state: State = State.UNCONFIGURED,
+        lifecycle: bool = True,
     ) -> None:
         if not state.is_primary:
             raise ValueError(f"node {name} cannot start in {state}: a node starts in a primary state")
+        if not lifecycle and state is not State.ACTIVE:
+            raise ValueError(f"node {name} has no lifecycle services (parameters only): it runs active, "
+                             f"not {state}")
         self.name = name
+        self.lifecycle = lifecycle
         self._clock = clock
         self._state = state
         self._types: dict[str, str] = {}
@@ -117,11 +125,18 @@ class SimNode:
         return dict(self._types)
 
     def valid_transitions(self) -> tuple[Transition, ...]:
-        """The transitions a client may request in the current state (none while in transition)."""
+        """The transitions a client may request in the current state (none while in transition, and
+        none ever for a plain node)."""
+        if not self.lifecycle:
+            return ()
         return tuple(step.transition for step in REQUESTABLE if step.start is self._state)
 
     def start(self, transition: Transition) -> TransitionEvent:
         """Begin ``transition``: move to its transition state. ``TransitionRefused`` if not valid now."""
+        if not self.lifecycle:
+            # The ROS backend's wording (sm_bt.ros.backend), so both backends read the same.
+            raise TransitionRefused(f"node {self.name} has no lifecycle services (parameters only): "
+                                    f"it cannot {transition.label}")
         if self.in_transition:
             raise TransitionRefused(
                 f"cannot {transition.label} while {self._state} (a transition is in progress)"

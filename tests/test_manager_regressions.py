@@ -1,0 +1,379 @@
+"""Failures the manager's property tests found, kept as plain scenarios (issue 10).
+
+Each test replays one minimal scenario (shrunk from what hypothesis found) through the same runner
+and invariants as ``test_manager_properties.py`` (see ``scenario.py`` for I1-I8). The section
+says which engine it was found on:
+
+* **found on main 2ad460c**, the engine before the issue-10 rewrite: each of these fails there
+  and passes on the rewrite;
+* **found on the rewrite** (6615c26 .. ca95643), each fixed by the commit named in its section.
+"""
+
+from __future__ import annotations
+
+from scenario import (
+    ChangeMode,
+    ChangeState,
+    ChangeTo,
+    HangNext,
+    ManagerOptions,
+    RejectParameters,
+    Scenario,
+    SimOptions,
+    Step,
+    TreeItem,
+    Trigger,
+    check,
+)
+
+# -- found on main 2ad460c ---------------------------------------------------------------------------
+
+
+def test_configure_then_a_mode_at_the_same_instant() -> None:
+    """Issue item 1, its own example: the mode request planned from the reported (unconfigured)
+    state while the configure calls were in flight: "cannot configure while configuring" (I3, I4)."""
+    check(Scenario(
+        model="pilot",
+        steps=(Step(0.0, ChangeState(part="pilot", transition="configure")),),
+        final=ChangeMode(part="pilot", mode="f_normal_mode"),
+        final_delay=0.0,
+    ))
+
+
+def test_a_node_then_its_system_at_the_same_instant() -> None:
+    """Item 1 across levels: a node request, then a system mode that drives the same node (I3, I4)."""
+    check(Scenario(
+        model="pilot",
+        steps=(Step(0.0, ChangeTo(part="amcl", target="active")),),
+        final=ChangeMode(part="pilot", mode="f_performance_mode"),
+        final_delay=0.0,
+    ))
+
+
+def test_a_system_then_one_of_its_nodes_at_the_same_instant() -> None:
+    """Item 1 the other way round, with rules on (I3, I4)."""
+    check(Scenario(
+        model="pilot_rules",
+        steps=(Step(0.0, ChangeState(part="pilot", transition="configure")),),
+        final=ChangeMode(part="laser_resender", mode="__DEFAULT__"),
+        final_delay=0.0,
+    ))
+
+
+def test_recovery_gives_up_on_a_hung_node() -> None:
+    """Item 3: amcl's configure never returns; each attempt timed out and aged out of the window,
+    so recovery retried forever (I6: 4th, 5th, 6th restore; still in flight at the end)."""
+    check(Scenario(
+        model="nav2_like",
+        manager=ManagerOptions(grace_period=0.0, recovery_window=30.0),
+        steps=(
+            Step(0.0, HangNext(node="amcl", transition="configure")),
+            Step(0.0, ChangeTo(part="amcl", target="active")),
+            Step(185.0, RejectParameters(node="amcl", reason=None)),
+        ),
+        final=ChangeMode(part="planning", mode="__DEFAULT__"),
+        expect_given_up="amcl",
+    ))
+
+
+def test_a_hung_node_given_up_is_reported_as_an_error() -> None:
+    """Item 3: with short timeouts the restores went on, and the divergence stayed "grace", never
+    an error that OnDivergence reports (I6)."""
+    check(Scenario(
+        model="nested",
+        manager=ManagerOptions(grace_period=0.5, request_timeout=3.0, recovery_window=5.0),
+        steps=(
+            Step(0.0, HangNext(node="arm", transition="configure")),
+            Step(0.0, ChangeTo(part="arm", target="active")),
+            Step(27.5, RejectParameters(node="arm", reason=None)),
+        ),
+        final=ChangeTo(part="drive", target="active.SLOW"),
+        expect_given_up="arm",
+    ))
+
+
+def test_rules_cascade_from_localization_to_navigation() -> None:
+    """Item 2 on the Nav2-like model: map_server fails, localization's rule degrades it, and
+    navigation's rule (which reads localization's mode) must follow; it stayed an override (I8)."""
+    check(Scenario(
+        model="nav2_like",
+        manager=ManagerOptions(grace_period=0.5),
+        steps=(
+            Step(0.0, ChangeMode(part="navigation", mode="f_normal_mode")),
+            Step(5.0, Trigger(node="map_server", outcome="error")),
+        ),
+        final=ChangeMode(part="planning", mode="NORMAL"),
+    ))
+
+
+def test_rules_cascade_in_a_generated_model() -> None:
+    """Item 2, as the generator found it: n1 fails, s1's rule sends s1 to S2, and s0's rule for
+    s1 in S2 never fired (I8)."""
+    check(Scenario(
+        model="generated",
+        model_text=CASCADE_MODEL,
+        steps=(
+            Step(0.0, ChangeMode(part="s0", mode="S3")),
+            Step(0.0, Trigger(node="n1", outcome="error")),
+        ),
+        final=ChangeTo(part="n1", target="active.__DEFAULT__"),
+    ))
+
+
+def test_hold_mode_ends_when_its_mode_is_lost_before_the_work_starts() -> None:
+    """Item 4: the user re-targets the held system before hold_mode's work starts; its inner
+    WaitForMode had no bound, so the subtree stayed RUNNING forever (I7)."""
+    check(Scenario(
+        model="actuation",
+        sim=SimOptions(transition_delay=0.0),
+        steps=(Step(0.018, ChangeMode(part="actuation", mode="__DEFAULT__")),),
+        tree=((TreeItem(kind="hold_mode", part="actuation", arg="MODERATE", timeout=9.8, ticks=3),),),
+        final=ChangeMode(part="manipulator", mode="__DEFAULT__"),
+    ))
+
+
+# -- found on 53d623c, fixed in ca95643 -----------------------------------------------------------------
+
+
+def test_a_node_cleaned_up_by_itself_after_a_preempted_configure_can_be_driven_again() -> None:
+    """pilot __DEFAULT__ sends configure to pointcloud_to_laser; a laser_resender request preempts
+    it (its scope does not hold that node) while the call is in flight; later the node cleans up by
+    itself. From then on its driver waits "for its state report (still unconfigured)" forever:
+    every request on it times out (I3; recovery's too)."""
+    check(Scenario(
+        model="pilot",
+        steps=(
+            Step(0.0, ChangeMode(part="pilot", mode="__DEFAULT__")),
+            Step(0.0, ChangeMode(part="laser_resender", mode="__DEFAULT__")),
+            Step(1.0, Trigger(node="pointcloud_to_laser")),
+        ),
+        final=ChangeTo(part="pointcloud_to_laser", target="active"),
+    ))
+
+
+def test_a_rule_does_not_undo_what_the_user_asked_for() -> None:
+    """n2 failed by itself (recovery off), so s1 diverges with a fault. The user then asks for n0
+    in M1, which makes s1's rule r1 (n0 is active.M1) true: the rule fires and takes n0 back to
+    inactive, against the README's "never against what a user asked for" (I3)."""
+    check(Scenario(
+        model="generated",
+        model_text=USER_CHANGE_MODEL,
+        manager=ManagerOptions(grace_period=0.0, recovery=False),
+        steps=(
+            Step(0.0, ChangeMode(part="s1", mode="__DEFAULT__")),
+            Step(1.0, Trigger(node="n2", outcome="error")),
+        ),
+        final=ChangeTo(part="n0", target="active.M1"),
+    ))
+
+
+# -- found on ca95643, fixed in a9cd1c3 -----------------------------------------------------------------
+
+
+def test_a_parent_diverging_after_a_cascade_does_not_stay_in_grace() -> None:
+    """Issue item 2, on the rewrite: n0 fails and comes back inactive, s1's rule sends s1 to S1,
+    and s0 (target __DEFAULT__) then diverges with cause "grace" for good: no timer ends its grace
+    period, so its rule for s1 in S1 never fires (200 s later it is still "grace"), unless some
+    unrelated event makes the manager look again (I8)."""
+    check(Scenario(
+        model="generated",
+        model_text=GRACE_MODEL,
+        manager=ManagerOptions(grace_period=0.5, request_timeout=2.0, recovery_attempts=1, recovery=False),
+        steps=(
+            Step(0.0, ChangeMode(part="s0", mode="__DEFAULT__")),
+            Step(0.5, Trigger(node="n0", outcome="error")),
+            Step(0.61, Trigger(node="n0")),
+            Step(0.61, Trigger(node="n2")),
+        ),
+        final=ChangeMode(part="s0", mode="__DEFAULT__"),
+    ))
+
+
+CASCADE_MODEL = """\
+s0:
+  ros__parameters:
+    type: system
+    parts:
+      s1
+    modes:
+      __DEFAULT__:
+        s1: active.S3
+      S1:
+        s1: active.__DEFAULT__
+      S2:
+        s1: active
+      S3:
+        s1: active.S3
+    rules:
+      r0:
+        if_target: active.S1
+        if_part: [n1, active.__DEFAULT__]
+        new_target: active.S3
+      cascade_parent:
+        if_target: active.S3
+        if_part: [s1, active.S2]
+        new_target: active.S2
+
+s1:
+  ros__parameters:
+    type: system
+    parts:
+      n0
+      n1
+    modes:
+      __DEFAULT__:
+        n0: inactive
+        n1: active.__DEFAULT__
+      S1:
+        n1: unconfigured
+      S2:
+        n0: __DONTCARE__
+      S3:
+        __order__: ["n0"]
+        n0: unconfigured
+        n1: inactive
+    rules:
+      r0:
+        if_target: active.S3
+        if_part: [n0, active.__DEFAULT__]
+        new_target: active.__DEFAULT__
+      cascade_sub:
+        if_target: active.S3
+        if_part: [n1, unconfigured]
+        new_target: active.S2
+
+n0:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          p0: 0.4
+
+n1:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          p0: "slow"
+          p1: false
+          p2: "laser"
+"""
+
+USER_CHANGE_MODEL = """\
+s1:
+  ros__parameters:
+    type: system
+    parts:
+      n0
+      n2
+    modes:
+      __DEFAULT__:
+        n0: unconfigured
+        n2: inactive
+      S1:
+        n0: inactive
+        n2: active
+    rules:
+      r1:
+        if_target: active.__DEFAULT__
+        if_part: [n0, active.M1]
+        new_target: active.S1
+
+n0:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          p0: 4
+      M1:
+        ros__parameters:
+          p0: 80
+
+n2:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          p0: 0.8
+"""
+
+GRACE_MODEL = """\
+s0:
+  ros__parameters:
+    type: system
+    parts:
+      s1
+      s2
+    modes:
+      __DEFAULT__:
+        __order__: ["s1"]
+        s2: active
+        s1: active.__DEFAULT__
+      S1:
+        __order__: ["s1"]
+        s1: active
+    rules:
+      cascade_parent:
+        if_target: active.__DEFAULT__
+        if_part: [s1, active.S1]
+        new_target: active.S1
+
+s1:
+  ros__parameters:
+    type: system
+    parts:
+      n0
+      n2
+    modes:
+      __DEFAULT__:
+        __order__: ["n0"]
+        n0: active
+        n2: active
+      S1:
+        __order__: ["n0"]
+        n0: active
+    rules:
+      cascade_sub:
+        if_target: active.__DEFAULT__
+        if_part: [n0, inactive]
+        new_target: active.S1
+
+s2:
+  ros__parameters:
+    type: system
+    parts:
+      n1
+    modes:
+      __DEFAULT__:
+        n1: active
+      S1:
+        n1: active
+
+n0:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          p0: false
+
+n1:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          p0: false
+
+n2:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          p0: false
+"""
