@@ -61,5 +61,5 @@ class Rig:
         return str(self.manager.actual(part))
 
 
-SIM_OPTIONS = {"transition_delay", "error_delay", "parameter_delay", "vanish_after", "initial_state",
+SIM_OPTIONS = {"transition_delay", "error_delay", "parameter_delay", "vanish_after", "initial_state", "report_delay",
                "initial_parameters", "clock", "late"}

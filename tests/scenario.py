@@ -210,10 +210,12 @@ class SimOptions:
     late: tuple[tuple[str, float], ...] = ()
     plain: tuple[str, ...] = ()
     slow: tuple[tuple[str, float], ...] = ()  # per-node callback delay
+    report_delay: float = 0.0  # reports after the answers, as ROS may deliver them
 
     @property
     def longest_delay(self) -> float:
-        return max([self.transition_delay, self.error_delay, self.parameter_delay, *(d for _, d in self.slow)])
+        return max([self.transition_delay, self.error_delay, self.parameter_delay, self.report_delay,
+                    *(d for _, d in self.slow)])
 
 
 @dataclass(frozen=True)
@@ -393,7 +395,8 @@ class _Runner:
         self.backend = SimBackend(
             self.model, transition_delay=sim.transition_delay, error_delay=sim.error_delay,
             parameter_delay=sim.parameter_delay, vanish_after=sim.vanish_after,
-            initial_state=dict(sim.initial_state), late=dict(sim.late), plain=sim.plain)
+            initial_state=dict(sim.initial_state), late=dict(sim.late), plain=sim.plain,
+            report_delay=sim.report_delay)
         for node, delay in sim.slow:
             self.backend.set_delay(node, delay)
         self.clock = self.backend.clock
@@ -1066,7 +1069,8 @@ def scenarios(draw: st.DrawFn, models: st.SearchStrategy[tuple[str, str | None]]
         transition_delay=pick(draw, delays), error_delay=pick(draw, delays),
         parameter_delay=pick(draw, [0.0, 0.01, 0.01, 0.05]),
         vanish_after=pick(draw, [1.0, 0.5, 3.0]),
-        initial_state=tuple(initial), late=tuple(late), plain=plain, slow=tuple(slow))
+        initial_state=tuple(initial), late=tuple(late), plain=plain, slow=tuple(slow),
+        report_delay=pick(draw, [0.0, 0.0, 0.005, 0.03]))
     steps = []
     at = 0.0
     for _ in range(draw(ints(0, max_steps))):

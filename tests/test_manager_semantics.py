@@ -222,3 +222,36 @@ def test_a_request_that_needs_a_vanished_node_is_refused_and_changes_nothing() -
     assert len(rig.backend.events) == sent, "no node was touched"
     # A mode that leaves the vanished node alone is still fine.
     assert rig.finish(rig.manager.change_mode("controller_server", "FAST")).succeeded
+
+
+# -- answers before reports (as ROS 2 may deliver them) ---------------------------------------------
+
+
+def test_confirmation_waits_for_the_reports_when_answers_come_first() -> None:
+    # Every answer arrives before the node's own reports of the change: the manager must neither
+    # plan from the stale reported state nor take an earlier set's late echo for the current mode.
+    rig = Rig(bundled("pilot"), rules=False, recovery=False, report_delay=0.03)
+    for mode in ("f_performance_mode", "f_energy_saving_mode", "f_degraded_mode", "f_normal_mode"):
+        request = rig.finish(rig.manager.change_mode("pilot", mode))
+        assert request.succeeded, (mode, request.reason)
+        assert rig.state("pilot") == f"active.{mode}"
+        for node in ("amcl", "controller_server"):
+            assert rig.manager.observation(node).parameters == rig.backend.node(node).parameters, (mode, node)
+    refused = [e for e in rig.backend.events if e.kind == "response" and "refused" in e.details]
+    assert refused == []
+
+
+def test_back_to_back_mode_sets_with_late_reports_end_in_the_last_mode() -> None:
+    rig = Rig(bundled("pilot"), rules=False, recovery=False, report_delay=0.05, parameter_delay=0.0)
+    rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    fast = rig.manager.change_mode("controller_server", "FAST")
+    rig.run(0.001)  # FAST is answered; its report is still on its way
+    slow = rig.manager.change_mode("controller_server", "SLOW")
+    rig.finish(slow)
+    assert fast.reason.startswith("preempted by") and slow.succeeded, slow.reason
+    confirmed_at = len(rig.events)
+    rig.run(0.2)  # every late report is in: none of them may take the confirmed mode back
+    later = [str(e.actual) for e in rig.events[confirmed_at:] if e.kind is EventKind.ACTUAL
+             and e.part == "controller_server"]
+    assert later == [] and rig.state("controller_server") == "active.SLOW"
+    assert rig.backend.node("controller_server").parameters["FollowPath.max_vel_x"] == 0.1

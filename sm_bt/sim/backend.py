@@ -14,6 +14,12 @@ the simulation, not to the node process: they survive a restart (:meth:`~SimBack
 them). Fault methods act at once (their reports to the listener come from inside the call); only the
 Backend requests are deferred.
 
+Reports to the listener come at once unless ``report_delay`` is set: then every report (appearing,
+state, parameters, vanishing) comes that many seconds after it happened, in order, while answers to
+requests still come at once. That is how ROS 2 can deliver them (a ``change_state`` answer before the
+node's ``transition_event``, a ``set_parameters`` answer before its ``/parameter_events``), and the
+engine must cope with either order.
+
 Nodes named in ``plain`` have no lifecycle services (parameters only), as a node without
 ``rclcpp_lifecycle`` on ROS: they are reported ``active`` with ``lifecycle=False``, accept parameter
 sets, and answer every ``change_state`` with a failure, through the clock like every answer.
@@ -118,15 +124,18 @@ class SimBackend:
         initial_parameters: Mapping[str, Mapping[str, ParamValue]] | None = None,
         late: Mapping[str, float] | None = None,
         plain: Collection[str] = (),
+        report_delay: float = 0.0,
     ) -> None:
         for label, value in (("transition_delay", transition_delay), ("error_delay", error_delay),
-                             ("parameter_delay", parameter_delay), ("vanish_after", vanish_after)):
+                             ("parameter_delay", parameter_delay), ("vanish_after", vanish_after),
+                             ("report_delay", report_delay)):
             _check_delay(label, value)
         self._clock = clock if clock is not None else VirtualClock()
         self.transition_delay = transition_delay
         self.error_delay = error_delay
         self.parameter_delay = parameter_delay
         self.vanish_after = vanish_after
+        self.report_delay = report_delay
         #: Everything that happened, oldest first.
         self.events: list[SimEvent] = []
 
@@ -486,7 +495,7 @@ class SimBackend:
         self._record(node, EventKind.VANISHED, reason)
         if node in self._visible and self._listener is not None:
             self._visible.discard(node)
-            self._listener.node_vanished(node, reason)
+            self._report(lambda listener: listener.node_vanished(node, reason))
         self._fail_pending(node, f"node {node} vanished")
 
     def _fail_pending(self, node: str, reason: str) -> None:
@@ -500,17 +509,35 @@ class SimBackend:
             return
         sim = self._nodes[node]
         self._visible.add(node)
-        self._listener.node_appeared(node, NodeReport(sim.state, sim.parameters, lifecycle=sim.lifecycle))
+        report = NodeReport(sim.state, sim.parameters, lifecycle=sim.lifecycle)
+        self._report(lambda listener: listener.node_appeared(node, report))
 
     def _moved(self, node: str, event: TransitionEvent) -> None:
         self._record(node, EventKind.TRANSITION, str(event), transition=event)
         if node in self._visible and self._listener is not None:
-            self._listener.node_state(node, event.goal)
+            self._report(lambda listener: listener.node_state(node, event.goal))
 
     def _parameters_changed(self, node: str, values: Mapping[str, ParamValue]) -> None:
         self._record(node, EventKind.PARAMETERS, _format(values), parameters=dict(values))
         if values and node in self._visible and self._listener is not None:
-            self._listener.node_parameters(node, dict(values))
+            changed = dict(values)
+            self._report(lambda listener: listener.node_parameters(node, changed))
+
+    def _report(self, deliver: Callable[[BackendListener], None]) -> None:
+        """Tell the listener now, or ``report_delay`` later (in order: equal delays run FIFO); a
+        report still on its way when the listener detaches is dropped."""
+        listener = self._listener
+        if listener is None:
+            return
+        if self.report_delay == 0:
+            deliver(listener)
+            return
+
+        def later() -> None:
+            if self._listener is listener:
+                deliver(listener)
+
+        self._clock.call_later(self.report_delay, later)
 
     def _record(self, node: str, kind: EventKind, details: str, *, transition: TransitionEvent | None = None,
                 parameters: Mapping[str, ParamValue] | None = None) -> None:
