@@ -255,3 +255,18 @@ def test_back_to_back_mode_sets_with_late_reports_end_in_the_last_mode() -> None
              and e.part == "controller_server"]
     assert later == [] and rig.state("controller_server") == "active.SLOW"
     assert rig.backend.node("controller_server").parameters["FollowPath.max_vel_x"] == 0.1
+
+
+def test_a_set_whose_report_came_under_another_request_is_not_awaited_later() -> None:
+    rig = Rig(bundled("pilot"), rules=False, recovery=False, report_delay=0.05, parameter_delay=0.0)
+    rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    first = rig.manager.change_mode("pilot", "f_performance_mode")  # sets controller_server FAST
+    rig.run(0.001)  # answered; the report is on its way
+    rig.manager.change_mode("laser_resender", "__DEFAULT__")  # preempts it; drives another node
+    assert first.reason.startswith("preempted by")
+    rig.run(0.2)
+    rig.backend.set_parameter("controller_server", "FollowPath.max_vel_x", 0.7)  # somebody else
+    rig.run(0.2)
+    again = rig.finish(rig.manager.change_mode("controller_server", "FAST"), limit=5.0)
+    assert again.succeeded, again.reason
+    assert rig.backend.node("controller_server").parameters["FollowPath.max_vel_x"] == 0.5

@@ -106,6 +106,12 @@ class NodeDriver:
         self._leaving = None
         self._parameters_set = None
 
+    def parameters_reported(self) -> None:
+        """The node reported parameter values: a set answered earlier is no longer awaited (if
+        the values are not the mode's, for instance an earlier set's late report, the next step
+        sends the mode's set again)."""
+        self._parameters_set = None
+
     def state_reported(self, state: State) -> None:
         """The node reported ``state``: a transition answered earlier has now shown in its reports.
         (Kept whether or not a step owns the node: a later owner must not wait for it.)"""
@@ -123,7 +129,7 @@ class NodeDriver:
         if owner.reached_goal:
             if obs.gone or not self._at(owner.goal, obs):
                 owner.failed(f"{self.node} left {owner.goal} while the request was in progress "
-                             f"(now {self._describe(obs)})")
+                             f"({self._now(owner.goal, obs)})")
             return
         if obs.gone:
             owner.failed(f"{self.node}: {obs.gone}")
@@ -229,7 +235,9 @@ class NodeDriver:
         return goal.state is not State.ACTIVE or goal.mode is None or goal.mode.matches(obs.parameters)
 
     @staticmethod
-    def _describe(obs: NodeObservation) -> str:
+    def _now(goal: Goal, obs: NodeObservation) -> str:
         if obs.gone:
             return obs.gone
-        return obs.state.label
+        if obs.state is goal.state and goal.mode is not None:
+            return f"its parameters no longer match mode {goal.mode.name}"
+        return f"now {obs.state.label}"

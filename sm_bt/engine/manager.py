@@ -280,6 +280,7 @@ class ModeManager:
     def _node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> None:
         with self._entry():
             self._apply(self._inference.node_parameters(node, changed))
+            self._drivers[node].parameters_reported()
             self._drivers[node].advance()
 
     def _node_vanished(self, node: str, reason: str) -> None:
