@@ -623,11 +623,15 @@ class _Runner:
         # in one may still end finalized, and then the target is out of reach.
         doomed = {node for node in needed if not self.backend.node(node).state.is_primary
                   or self.backend.node(node).state is State.FINALIZED or "shutdown" in self.backend.in_flight(node)}
+        # A node restarted by the healing whose report is still on its way (report_delay) is gone
+        # as far as the manager can know: a request made now may be refused for it.
+        unseen = {node for node in needed if self.manager.observation(node).gone}
         request = self.request(final, FINAL_TIMEOUT)
         self.advance(self.clock.now() + FINAL_TIMEOUT + 1.0, stop=lambda: request.done)
         missing = [node for node, wanted in needed.items()
                    if (self.backend.is_plain(node) and wanted.state is not State.ACTIVE)
-                   or (node in doomed and self.backend.node(node).state is State.FINALIZED)]
+                   or (node in doomed and self.backend.node(node).state is State.FINALIZED)
+                   or node in unseen]
         self.check_final(request, not missing, missing)
         self.settle("after the final request")
         self.check_requests()

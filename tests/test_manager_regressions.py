@@ -15,6 +15,7 @@ from scenario import (
     ChangeMode,
     ChangeState,
     ChangeTo,
+    Crash,
     HangNext,
     ManagerOptions,
     RejectParameters,
@@ -188,6 +189,40 @@ def test_a_parent_diverging_after_a_cascade_does_not_stay_in_grace() -> None:
         final=ChangeMode(part="s0", mode="__DEFAULT__"),
     ))
 
+
+# -- found by make stress on 4b1e1d4 (answers before reports), fixed after it ------------------------------
+
+
+def test_reports_of_a_transition_the_node_made_by_itself_do_not_mislead_the_driver() -> None:
+    """lidar configures by itself (and fails) at the instant a request configures it; with the
+    reports 30 ms behind the answers, the self-made transition's late "configuring" report ended
+    the driver's wait for its own configure, and the stale "unconfigured" after it made the driver
+    send configure again to an inactive node: refused (I3). (Shrunk by hand from a stress find.)"""
+    check(Scenario(
+        model="nested",
+        manager=ManagerOptions(grace_period=0.1, recovery=False),
+        sim=SimOptions(transition_delay=0.0, report_delay=0.03),
+        steps=(Step(1.0, Trigger(node="lidar", outcome="failure")),),
+        final=ChangeTo(part="lidar", target="inactive"),
+        final_delay=0.0,
+    ))
+
+
+def test_a_node_restarted_at_the_instant_of_a_request_may_be_refused_for_it() -> None:
+    """The heal restarts controller_server at the instant of the final request, and its report is
+    30 ms behind: the manager, which knows it only as vanished, refuses the request and names it.
+    That is the honest answer (I3 now judges reachability as the manager can know it)."""
+    check(Scenario(
+        model="pilot_rules",
+        manager=ManagerOptions(grace_period=0.0, request_timeout=13.0, recovery_window=30.0, rules=False),
+        sim=SimOptions(vanish_after=3.0, report_delay=0.03),
+        steps=(
+            Step(1.0, Crash(node="controller_server")),
+            Step(5.0, RejectParameters(node="laser_resender", reason=None)),  # known vanished by now
+        ),
+        final=ChangeMode(part="pilot", mode="f_normal_mode"),
+        final_delay=0.0,
+    ))
 
 CASCADE_MODEL = """\
 s0:

@@ -17,7 +17,7 @@ from typing import Protocol
 
 from sm_bt.engine.backend import CallResult, Done
 from sm_bt.engine.inference import NodeObservation
-from sm_bt.engine.lifecycle import PlanError, Transition, plan
+from sm_bt.engine.lifecycle import PlanError, Step, Transition, plan
 from sm_bt.model.states import State
 from sm_bt.model.types import NodeMode, ParamValue
 
@@ -68,7 +68,8 @@ class _Call:
     sent: float
     owner: Owner | None  # who it was sent for (it may have been preempted since)
     transition: Transition | None = None  # None for a parameter set
-    start: State = State.UNKNOWN  # the state a transition was sent from
+    goal: State = State.UNKNOWN  # where a transition leads on success
+    goal_reported: bool = False  # the node reported that goal while the call was in flight
 
     @property
     def what(self) -> str:
@@ -84,9 +85,11 @@ class NodeDriver:
         self.io = io
         self.owner: Owner | None = None
         self.call: _Call | None = None
-        # After a transition answered with success: its start state, until a report shows the node
-        # left it (the answer and the node's state reports may arrive in either order).
-        self._leaving: State | None = None
+        # After a transition answered with success before the node reported its goal state: that
+        # goal, until it is reported. The answer and the reports may come in either order, and
+        # reports of an earlier transition (one the node made by itself) may still be on their
+        # way: none of them says where the node is until our transition's own goal report.
+        self._awaiting: State | None = None
         # A parameter set answered with success, until the node's reports show its values: the
         # answer may come before the parameter events (which alone say what the node holds).
         self._parameters_set: str | None = None
@@ -103,7 +106,7 @@ class NodeDriver:
 
     def node_appeared(self) -> None:
         """A (new) process of the node was reported: nothing from the old one is awaited."""
-        self._leaving = None
+        self._awaiting = None
         self._parameters_set = None
 
     def parameters_reported(self) -> None:
@@ -113,10 +116,13 @@ class NodeDriver:
         self._parameters_set = None
 
     def state_reported(self, state: State) -> None:
-        """The node reported ``state``: a transition answered earlier has now shown in its reports.
-        (Kept whether or not a step owns the node: a later owner must not wait for it.)"""
-        if state is not self._leaving:
-            self._leaving = None
+        """The node reported ``state`` (kept whether or not a step owns the node: a later owner
+        must not wait for a report that came under an earlier one)."""
+        call = self.call
+        if call is not None and call.transition is not None and state is call.goal:
+            call.goal_reported = True
+        if state is self._awaiting:
+            self._awaiting = None
 
     # -- progress -------------------------------------------------------------------------------
 
@@ -134,9 +140,8 @@ class NodeDriver:
         if obs.gone:
             owner.failed(f"{self.node}: {obs.gone}")
             return
-        if not obs.seen or not obs.state.is_primary or obs.state is self._leaving:
+        if not obs.seen or not obs.state.is_primary or self._awaiting is not None:
             return
-        self._leaving = None
         goal = owner.goal
         mode = goal.mode if goal.state is State.ACTIVE else None
         if mode is not None and not mode.matches(obs.parameters):
@@ -151,7 +156,7 @@ class NodeDriver:
                 owner.failed(f"{self.node}: {error}")
                 return
             more = f" (1 of {len(path)} steps to {goal.state.label})" if len(path) > 1 else ""
-            self._send_transition(owner, path[0].transition, obs.state, more)
+            self._send_transition(owner, path[0], more)
             return
         owner.reached()
 
@@ -169,8 +174,8 @@ class NodeDriver:
             return f"{self.node}: waiting for the node to appear"
         if not obs.state.is_primary:
             return f"{self.node}: waiting while it is {obs.state.label}"
-        if obs.state is self._leaving:
-            return f"{self.node}: waiting for its state report (still {obs.state.label})"
+        if self._awaiting is not None:
+            return f"{self.node}: waiting for it to report {self._awaiting.label}"
         if self._parameters_set is not None:
             return f"{self.node}: waiting for the parameters of mode {self._parameters_set} to be reported"
         return f"{self.node}: next step towards {owner.goal if owner else 'nothing'}"
@@ -201,21 +206,19 @@ class NodeDriver:
 
         self.io.send_parameters(self.node, values, done)
 
-    def _send_transition(self, owner: Owner, transition: Transition, start: State, more: str) -> None:
-        call = _Call(transition.label + more, self.io.now(), owner, transition, start)
+    def _send_transition(self, owner: Owner, step: Step, more: str) -> None:
+        call = _Call(step.transition.label + more, self.io.now(), owner, step.transition, step.goal)
         self.call = call
 
         def done(result: CallResult) -> None:
             if self.call is not call:
                 return
             self.call = None
-            # Answered with success while the reports still show the start state: the reports of
-            # the move are yet to come (state_reported clears it).
-            reported = self.io.observation(self.node).state
-            self._leaving = start if result.ok and reported is start else None
+            if result.ok and not call.goal_reported:
+                self._awaiting = call.goal
             self._answered(call, result)
 
-        self.io.send_transition(self.node, transition, done)
+        self.io.send_transition(self.node, step.transition, done)
 
     def _answered(self, call: _Call, result: CallResult) -> None:
         owner = self.owner
