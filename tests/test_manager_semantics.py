@@ -270,3 +270,17 @@ def test_a_set_whose_report_came_under_another_request_is_not_awaited_later() ->
     again = rig.finish(rig.manager.change_mode("controller_server", "FAST"), limit=5.0)
     assert again.succeeded, again.reason
     assert rig.backend.node("controller_server").parameters["FollowPath.max_vel_x"] == 0.5
+
+
+def test_a_set_answered_but_not_yet_reported_is_waited_for_before_judging_the_mode() -> None:
+    # SLOW is answered, its report is on its way, and a request for the default mode comes: the
+    # node still reports the default values, but it holds SLOW's. (Found by the property tests.)
+    rig = Rig(bundled("pilot"), rules=False, recovery=False, report_delay=0.03)
+    rig.finish(rig.manager.change_mode("controller_server", "__DEFAULT__"))
+    rig.manager.change_mode("controller_server", "SLOW")
+    rig.run(0.015)  # parameter_delay 0.01: answered, not reported
+    back = rig.finish(rig.manager.change_mode("controller_server", "__DEFAULT__"))
+    assert back.succeeded, back.reason
+    rig.run(0.2)
+    assert rig.state("controller_server") == "active.__DEFAULT__"
+    assert rig.backend.node("controller_server").parameters["FollowPath.max_vel_x"] == 0.3

@@ -69,12 +69,16 @@ class _Call:
     owner: Owner | None  # who it was sent for (it may have been preempted since)
     transition: Transition | None = None  # None for a parameter set
     goal: State = State.UNKNOWN  # where a transition leads on success
-    goal_reported: bool = False  # the node reported that goal while the call was in flight
+    goal_reported: bool = False  # the node reported that goal (or, for a set, parameters) meanwhile
 
     @property
     def what(self) -> str:
         """The call itself (``activate``), without the feedback's progress."""
         return self.label if self.transition is None else self.transition.label
+
+
+#: Parameter sets sent for one plan step before it fails: the node keeps reporting other values.
+_MAX_SETS = 3
 
 
 class NodeDriver:
@@ -90,14 +94,17 @@ class NodeDriver:
         # reports of an earlier transition (one the node made by itself) may still be on their
         # way: none of them says where the node is until our transition's own goal report.
         self._awaiting: State | None = None
-        # A parameter set answered with success, until the node's reports show its values: the
-        # answer may come before the parameter events (which alone say what the node holds).
+        # A parameter set answered with success before the node reported parameters: its mode,
+        # until a report comes (the answer may come before the parameter events, which alone say
+        # what the node holds).
         self._parameters_set: str | None = None
+        self._sets = 0  # parameter sets sent for the current owner (a node that keeps other values)
 
     # -- ownership ------------------------------------------------------------------------------
 
     def assign(self, owner: Owner) -> None:
         self.owner = owner
+        self._sets = 0
         self.advance()
 
     def release(self, owner: Owner) -> None:
@@ -114,6 +121,8 @@ class NodeDriver:
         the values are not the mode's, for instance an earlier set's late report, the next step
         sends the mode's set again)."""
         self._parameters_set = None
+        if self.call is not None and self.call.transition is None:
+            self.call.goal_reported = True
 
     def state_reported(self, state: State) -> None:
         """The node reported ``state`` (kept whether or not a step owns the node: a later owner
@@ -140,15 +149,18 @@ class NodeDriver:
         if obs.gone:
             owner.failed(f"{self.node}: {obs.gone}")
             return
-        if not obs.seen or not obs.state.is_primary or self._awaiting is not None:
+        if not obs.seen or not obs.state.is_primary or self._awaiting is not None \
+                or self._parameters_set is not None:
             return
         goal = owner.goal
         mode = goal.mode if goal.state is State.ACTIVE else None
         if mode is not None and not mode.matches(obs.parameters):
-            if self._parameters_set != mode.name:  # not sent yet (waiting otherwise)
+            if self._sets >= _MAX_SETS:
+                owner.failed(f"{self.node}: the parameters of mode {mode.name} were set {self._sets} times, "
+                             f"but the node reports other values")
+            else:
                 self._send_parameters(owner, mode)
             return
-        self._parameters_set = None
         if obs.state is not goal.state:
             try:
                 path = plan(obs.state, goal.state)
@@ -196,12 +208,13 @@ class NodeDriver:
         values = mode.values()
         call = _Call(f"set parameters of mode {mode.name}", self.io.now(), owner)
         self.call = call
+        self._sets += 1
 
         def done(result: CallResult) -> None:
             if self.call is not call:
                 return
             self.call = None
-            self._parameters_set = mode.name if result.ok else None
+            self._parameters_set = mode.name if result.ok and not call.goal_reported else None
             self._answered(call, result)
 
         self.io.send_parameters(self.node, values, done)
