@@ -19,6 +19,7 @@ from scenario import (
     HangNext,
     ManagerOptions,
     RejectParameters,
+    Restart,
     Scenario,
     SimOptions,
     Step,
@@ -221,6 +222,39 @@ def test_a_node_restarted_at_the_instant_of_a_request_may_be_refused_for_it() ->
             Step(5.0, RejectParameters(node="laser_resender", reason=None)),  # known vanished by now
         ),
         final=ChangeMode(part="pilot", mode="f_normal_mode"),
+        final_delay=0.0,
+    ))
+
+
+def test_a_transition_refused_because_the_node_moved_by_itself_is_planned_again() -> None:
+    """lidar starts a transition by itself while the final request is made, and its reports are
+    30 ms late: the cleanup planned from the stale "inactive" is refused ("cannot cleanup while
+    shuttingdown"). A refusal means the report was out of date: the driver plans again from the
+    next report instead of failing (I3). (Found by make stress.)"""
+    check(Scenario(
+        model="nested",
+        manager=ManagerOptions(grace_period=0.5, request_timeout=20.0, recovery_attempts=1),
+        sim=SimOptions(transition_delay=0.2, error_delay=0.0, parameter_delay=0.0,
+                       initial_state=(("lidar", "inactive"),), report_delay=0.03),
+        steps=(Step(1.0, Trigger(node="lidar", choice=2, on_error="failure")),),
+        final=ChangeTo(part="lidar", target="unconfigured"),
+        final_delay=0.01,
+    ))
+
+
+def test_a_transition_refused_after_a_restart_not_yet_reported_is_planned_again() -> None:
+    """drive restarts (unconfigured) at the instant of the final request, its report 5 ms late:
+    the deactivate planned from the stale "active" is refused; the driver plans again from the
+    restarted node's report (I3). (Found by make stress.)"""
+    check(Scenario(
+        model="nested",
+        manager=ManagerOptions(grace_period=0.5, request_timeout=13.0, recovery_window=5.0, recovery=False),
+        sim=SimOptions(transition_delay=0.01, error_delay=0.0, report_delay=0.005),
+        steps=(
+            Step(0.0, ChangeMode(part="robot", mode="__DEFAULT__")),
+            Step(20.67, Restart(node="drive")),
+        ),
+        final=ChangeTo(part="base", target="unconfigured"),
         final_delay=0.0,
     ))
 

@@ -31,10 +31,17 @@ from sm_bt.model.types import ParamValue
 
 @dataclass(frozen=True)
 class CallResult:
-    """Outcome of a request to a node. ``reason`` says why when ``ok`` is false."""
+    """Outcome of a request to a node. ``reason`` says why when ``ok`` is false.
+
+    ``refused`` (``change_state`` only): the node did not run the transition because it is not
+    valid in the state the node is in. Nothing changed on the node; if the caller planned it from
+    the state last reported, that report was out of date (the node moved since, by itself or for
+    someone else), and the next report tells where it is.
+    """
 
     ok: bool
     reason: str = ""
+    refused: bool = False
 
 
 Done = Callable[[CallResult], None]

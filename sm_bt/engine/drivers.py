@@ -70,6 +70,7 @@ class _Call:
     transition: Transition | None = None  # None for a parameter set
     goal: State = State.UNKNOWN  # where a transition leads on success
     goal_reported: bool = False  # the node reported that goal (or, for a set, parameters) meanwhile
+    any_report: bool = False  # the node reported a state meanwhile
 
     @property
     def what(self) -> str:
@@ -79,6 +80,8 @@ class _Call:
 
 #: Parameter sets sent for one plan step before it fails: the node keeps reporting other values.
 _MAX_SETS = 3
+#: Transitions refused for one plan step (the node was not where its reports said) before it fails.
+_MAX_REFUSALS = 3
 
 
 class NodeDriver:
@@ -99,12 +102,15 @@ class NodeDriver:
         # what the node holds).
         self._parameters_set: str | None = None
         self._sets = 0  # parameter sets sent for the current owner (a node that keeps other values)
+        # A transition was refused: the reported state was out of date; wait for the next report.
+        self._outdated = False
+        self._refusals = 0  # for the current owner
 
     # -- ownership ------------------------------------------------------------------------------
 
     def assign(self, owner: Owner) -> None:
         self.owner = owner
-        self._sets = 0
+        self._sets = self._refusals = 0
         self.advance()
 
     def release(self, owner: Owner) -> None:
@@ -115,6 +121,7 @@ class NodeDriver:
         """A (new) process of the node was reported: nothing from the old one is awaited."""
         self._awaiting = None
         self._parameters_set = None
+        self._outdated = False
 
     def parameters_reported(self) -> None:
         """The node reported parameter values: a set answered earlier is no longer awaited (if
@@ -128,10 +135,12 @@ class NodeDriver:
         """The node reported ``state`` (kept whether or not a step owns the node: a later owner
         must not wait for a report that came under an earlier one)."""
         call = self.call
-        if call is not None and call.transition is not None and state is call.goal:
-            call.goal_reported = True
+        if call is not None and call.transition is not None:
+            call.any_report = True
+            call.goal_reported = call.goal_reported or state is call.goal
         if state is self._awaiting:
             self._awaiting = None
+        self._outdated = False
 
     # -- progress -------------------------------------------------------------------------------
 
@@ -150,7 +159,7 @@ class NodeDriver:
             owner.failed(f"{self.node}: {obs.gone}")
             return
         if not obs.seen or not obs.state.is_primary or self._awaiting is not None \
-                or self._parameters_set is not None:
+                or self._parameters_set is not None or self._outdated:
             return
         goal = owner.goal
         mode = goal.mode if goal.state is State.ACTIVE else None
@@ -190,6 +199,8 @@ class NodeDriver:
             return f"{self.node}: waiting for it to report {self._awaiting.label}"
         if self._parameters_set is not None:
             return f"{self.node}: waiting for the parameters of mode {self._parameters_set} to be reported"
+        if self._outdated:
+            return f"{self.node}: waiting for its state report (it was not {obs.state.label} any more)"
         return f"{self.node}: next step towards {owner.goal if owner else 'nothing'}"
 
     def stall(self) -> str:
@@ -235,6 +246,13 @@ class NodeDriver:
 
     def _answered(self, call: _Call, result: CallResult) -> None:
         owner = self.owner
+        if result.refused and owner is not None and self._refusals < _MAX_REFUSALS:
+            # Planned from a report that was out of date: plan again from the next one.
+            if owner is call.owner:
+                self._refusals += 1
+            self._outdated = not call.any_report
+            self.advance()
+            return
         if not result.ok and owner is not None and owner is call.owner:
             owner.failed(f"{self.node}: {call.what} failed: {result.reason or 'refused'}")
             return

@@ -188,8 +188,8 @@ class RosBackend:
         with self._lock:
             events_before = peer.events
 
-        def fail(reason: str) -> None:
-            self._dispatch(lambda: done(CallResult(False, reason)))
+        def fail(reason: str, refused: bool = False) -> None:
+            self._dispatch(lambda: done(CallResult(False, reason, refused)))
 
         def explained(response: Any) -> None:
             # A transition that ran publishes transition events; one refused in the node's state
@@ -202,7 +202,7 @@ class RosBackend:
                 return
             available = sorted({item.transition.label for item in response.available_transitions})
             fail(f"{transition.label} of {node} refused: not a transition of its state {state.label} "
-                 f"(available: {', '.join(available) or 'none'})")
+                 f"(available: {', '.join(available) or 'none'})", refused=True)
 
         def answered(response: Any) -> None:
             if response.success:

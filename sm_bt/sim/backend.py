@@ -396,7 +396,7 @@ class SimBackend:
         try:
             event = self._nodes[node].start(transition)
         except TransitionRefused as error:
-            self._respond(call, CallResult(False, f"{transition.label} of {node} refused: {error}"))
+            self._respond(call, CallResult(False, f"{transition.label} of {node} refused: {error}", refused=True))
             return
         self._moved(node, event)
         if (node, transition) in self._hangs:
