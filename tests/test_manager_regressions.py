@@ -258,6 +258,55 @@ def test_a_transition_refused_after_a_restart_not_yet_reported_is_planned_again(
         final_delay=0.0,
     ))
 
+
+def test_the_nodes_a_preempting_request_does_not_drive_are_carried_on() -> None:
+    """actuation -> MODERATE is preempted by a request for the manipulator alone while drive_base
+    still comes up: drive_base was left short of MODERATE's target, which counted as a fault, and
+    a rule of actuation took everything (the manipulator the user had just asked for included)
+    down. The manager now carries on with drive_base (I3). (Found by the property tests.)"""
+    check(Scenario(
+        model="actuation",
+        manager=ManagerOptions(grace_period=0.0, request_timeout=16.0, recovery_attempts=1, recovery=False),
+        sim=SimOptions(transition_delay=1.0, slow=(("drive_base", 3.4), ("manipulator", 3.6))),
+        steps=(Step(1.0, ChangeTo(part="actuation", target="active.MODERATE")),),
+        final=ChangeTo(part="manipulator", target="active.STRONG"),
+        final_delay=0.01,
+    ))
+
+
+def test_a_node_whose_move_by_itself_is_reported_late_is_taken_back_to_its_goal() -> None:
+    """laser_resender starts deactivating by itself at the instant a mode change begins; the
+    manager still sees it active (reports 30 ms late), takes its step as reached, and then the
+    report comes: the step failed the request. It now takes the node back to its goal (I3)."""
+    check(Scenario(
+        model="pilot",
+        manager=ManagerOptions(grace_period=0.5, recovery=False),
+        sim=SimOptions(report_delay=0.03, slow=(("laser_resender", 1.1),)),
+        steps=(
+            Step(0.0, ChangeMode(part="pilot", mode="f_normal_mode")),
+            Step(10.0, Trigger(node="laser_resender")),
+        ),
+        final=ChangeMode(part="pilot", mode="f_performance_mode"),
+        final_delay=0.01,
+    ))
+
+
+def test_a_refusal_answered_after_the_nodes_appearance_is_not_waited_on() -> None:
+    """amcl restarts active, its appearance 5 ms late; a configure planned from its old state is
+    refused, and the answer comes after the appearance: the driver waited for a further state
+    report that never came (I3). (Found by the property tests.)"""
+    check(Scenario(
+        model="pilot",
+        manager=ManagerOptions(grace_period=0.5, request_timeout=9.0, recovery=False),
+        sim=SimOptions(transition_delay=0.0, parameter_delay=0.0, report_delay=0.005),
+        steps=(
+            Step(0.0, Restart(node="amcl", state="active")),
+            Step(0.0, ChangeState(part="pilot", transition="configure")),
+        ),
+        final=ChangeMode(part="pilot", mode="f_slow_mode"),
+        final_delay=0.01,
+    ))
+
 CASCADE_MODEL = """\
 s0:
   ros__parameters:

@@ -93,7 +93,7 @@ def test_a_transition_the_node_refuses_fails_with_the_reason_and_the_node_keeps_
     # amcl is unconfigured: activate is not a transition of that state (rclpy would crash on the id alone).
     backend.change_state("amcl", Transition.ACTIVATE, record)
     assert done.wait(5.0)
-    assert not results[0].ok
+    assert not results[0].ok and results[0].refused  # nothing ran: the caller's view was out of date
     assert results[0].reason == "activate of amcl refused: not a transition of its state unconfigured " \
                                 "(available: configure, shutdown)"
     pilot.settle(pilot.manager.change_mode("amcl", "__DEFAULT__"))

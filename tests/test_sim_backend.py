@@ -166,7 +166,7 @@ def test_invalid_transition_refused_through_the_clock() -> None:
     assert results == []
     backend.clock.run_pending()
     assert results == [CallResult(False, "configure of amcl refused: transition configure is not valid "
-                                         "in state active (valid: deactivate, shutdown)")]
+                                         "in state active (valid: deactivate, shutdown)", refused=True)]
     assert recorder.reports == [] and backend.node("amcl").state is S.ACTIVE
 
 
@@ -178,7 +178,7 @@ def test_request_during_a_transition_refused() -> None:
     backend.change_state("amcl", T.UNCONFIGURED_SHUTDOWN, second.append)
     backend.clock.run_pending()
     assert second == [CallResult(False, "shutdown of amcl refused: cannot shutdown while configuring "
-                                        "(a transition is in progress)")]
+                                        "(a transition is in progress)", refused=True)]
     backend.clock.advance(1.0)
     assert first == [CallResult(True)]
     assert recorder.states("amcl") == [S.CONFIGURING, S.INACTIVE]

@@ -82,6 +82,8 @@ class _Call:
 _MAX_SETS = 3
 #: Transitions refused for one plan step (the node was not where its reports said) before it fails.
 _MAX_REFUSALS = 3
+#: Times a node that reached its step's goal is taken back there before the step fails.
+_MAX_RELAPSES = 2
 
 
 class NodeDriver:
@@ -105,23 +107,31 @@ class NodeDriver:
         # A transition was refused: the reported state was out of date; wait for the next report.
         self._outdated = False
         self._refusals = 0  # for the current owner
+        self._relapses = 0  # times the node left the current owner's goal after reaching it
+        self._back_to_goal = False  # taking it back there
 
     # -- ownership ------------------------------------------------------------------------------
 
     def assign(self, owner: Owner) -> None:
         self.owner = owner
-        self._sets = self._refusals = 0
+        self._sets = self._refusals = self._relapses = 0
+        self._back_to_goal = False
         self.advance()
 
     def release(self, owner: Owner) -> None:
         if self.owner is owner:
             self.owner = None
 
-    def node_appeared(self) -> None:
-        """A (new) process of the node was reported: nothing from the old one is awaited."""
+    def node_appeared(self, state: State) -> None:
+        """A (new) process of the node was reported, with its state and every parameter: nothing
+        reported before is awaited any more (a call in flight now has its answer's news too)."""
         self._awaiting = None
         self._parameters_set = None
         self._outdated = False
+        call = self.call
+        if call is not None:
+            call.any_report = True
+            call.goal_reported = call.transition is None or state is call.goal
 
     def parameters_reported(self) -> None:
         """The node reported parameter values: a set answered earlier is no longer awaited (if
@@ -150,11 +160,17 @@ class NodeDriver:
         if owner is None or self.call is not None:
             return
         obs = self.io.observation(self.node)
-        if owner.reached_goal:
-            if obs.gone or not self._at(owner.goal, obs):
+        if owner.reached_goal and self._at(owner.goal, obs):
+            return
+        if owner.reached_goal and not self._back_to_goal:
+            # It left the goal while the request runs (by itself, or its move was reported late):
+            # take it back, a bounded number of times.
+            self._relapses += 1
+            if self._relapses > _MAX_RELAPSES or obs.gone:
                 owner.failed(f"{self.node} left {owner.goal} while the request was in progress "
                              f"({self._now(owner.goal, obs)})")
-            return
+                return
+            self._back_to_goal = True
         if obs.gone:
             owner.failed(f"{self.node}: {obs.gone}")
             return
@@ -179,6 +195,7 @@ class NodeDriver:
             more = f" (1 of {len(path)} steps to {goal.state.label})" if len(path) > 1 else ""
             self._send_transition(owner, path[0], more)
             return
+        self._back_to_goal = False
         owner.reached()
 
     def describe(self) -> str:
@@ -187,7 +204,7 @@ class NodeDriver:
         if self.call is not None:
             return f"{self.node}: {self.call.label}"
         owner = self.owner
-        if owner is not None and owner.reached_goal:
+        if owner is not None and owner.reached_goal and not self._back_to_goal:
             return f"{self.node}: done"
         if obs.gone:
             return f"{self.node}: {obs.gone}"

@@ -29,18 +29,26 @@ class Host(Protocol):
 
 class Execution:
     """``request`` in progress: its plan over ``scope`` (the nodes it drives), and the targets it
-    replaced (restored if it is withdrawn)."""
+    replaced (restored if it is withdrawn).
+
+    A *continuation* (``continuation=True``) carries on with the nodes of a preempted request
+    that the preempting one does not drive: its plan holds only those nodes, and it is done when
+    they reached their goals (the part as a whole is no longer expected to reach the target).
+    """
 
     def __init__(self, host: Host, request: Request, scope: frozenset[str],
-                 previous_targets: dict[str, tuple[StateMode | None, Origin | None]]) -> None:
+                 previous_targets: dict[str, tuple[StateMode | None, Origin | None]],
+                 continuation: bool = False) -> None:
         self.host = host
         self.request = request
         self.scope = scope
         self.previous_targets = previous_targets
+        self.continuation = continuation
         self.active = True
         self.planned = False  # every step reached its goal; waiting for the part's actual to confirm
         self.timer: TimerHandle | None = None
-        self.root, self.steps = build_plan(host.model, self, request.part, request.target)
+        self.root, self.steps = build_plan(host.model, self, request.part, request.target,
+                                           scope if continuation else None)
 
     # -- the plan's run (see plans.Run) ---------------------------------------------------------
 

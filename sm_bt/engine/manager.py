@@ -267,7 +267,7 @@ class ModeManager:
             log.info("node %s appeared: %s%s", node, report.state.label,
                      "" if report.lifecycle else " (parameters only)")
             self._renew_budgets([node])
-            self._drivers[node].node_appeared()
+            self._drivers[node].node_appeared(report.state)
             self._apply(self._inference.node_appeared(node, report.state, report.parameters, report.lifecycle))
             self._drivers[node].advance()
 
@@ -335,21 +335,37 @@ class ModeManager:
         # A rule's or recovery's request follows its own log line: the start is detail then.
         (log.info if origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id, description,
                                                            origin.value)
-        for execution in list(self._executions.values()):
-            if execution.scope & scope or execution.request.part == part:
-                self.finish(execution, False, f"preempted by request #{request.id} ({description})")
+        preempted = [e for e in self._executions.values() if e.scope & scope or e.request.part == part]
+        for execution in preempted:
+            self.finish(execution, False, f"preempted by request #{request.id} ({description})")
         previous = self._assign_targets(implied, origin, transition)
         if origin is Origin.USER:
             self._renew_budgets(previous)
-        execution = Execution(self, request, scope, previous)
+        self._run(Execution(self, request, scope, previous), timeout)
+        # The last request wins where it drives; elsewhere what the preempted ones asked for stands.
+        for execution in preempted:
+            if execution.scope - scope:
+                self._continue(execution, execution.scope - scope)
+        return request
+
+    def _continue(self, preempted: Execution, nodes: frozenset[str]) -> None:
+        """Carry on with ``nodes`` of a preempted request: their targets are still what it asked."""
+        old = preempted.request
+        description = f"continue #{old.id} ({old.description}) for {', '.join(sorted(nodes))}"
+        request = Request(old.part, old.target, description, old.origin, self.clock.now(), withdraw=self._withdraw)
+        (log.info if old.origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id,
+                                                               description, old.origin.value)
+        self._run(Execution(self, request, nodes, {}, continuation=True), None)
+
+    def _run(self, execution: Execution, timeout: float | None) -> None:
+        request = execution.request
         request._progress = lambda: self._locked(execution.feedback)
         self._executions[request.id] = execution
-        self._divergences.busy(scope, +1)
+        self._divergences.busy(execution.scope, +1)
         limit = self.request_timeout if timeout is None else timeout
         execution.timer = self.clock.call_later(limit, lambda: self._timed_out(execution, limit))
-        self._emit(EventKind.REQUEST, part, f"#{request.id} {description} started", request=request)
+        self._emit(EventKind.REQUEST, request.part, f"#{request.id} {request.description} started", request=request)
         execution.start()
-        return request
 
     def _refuse(self, part: str, description: str, reason: str) -> Request:
         now = self.clock.now()
@@ -388,7 +404,7 @@ class ModeManager:
         """The plan is done: succeed once the part's actual is the target."""
         request = execution.request
         actual = self._inference.actual(request.part)
-        if actual.known and actual.state_mode == request.target:
+        if execution.continuation or (actual.known and actual.state_mode == request.target):
             self.finish(execution, True, "")
         else:
             self._confirming.setdefault(request.part, set()).add(execution)

@@ -137,13 +137,15 @@ class Parallel(_Composite):
                 self._finished()
 
 
-def build_plan(model: Model, run: Run, part: str, target: StateMode) -> tuple[Job, list[Step]]:
+def build_plan(model: Model, run: Run, part: str, target: StateMode,
+               only: frozenset[str] | None = None) -> tuple[Job, list[Step]]:
     """The plan taking ``part`` to ``target``, and its steps (one per node, in plan order).
 
     A system's target becomes a :class:`Sequence` of its switching order's stages, each a
     :class:`Parallel` of its parts; going to a non-active state, the parts are taken down in the
     reverse order of the default mode's stages. A node shared by two systems gets one step, at
     its first place (the one :func:`~sm_bt.engine.hierarchy.implied_targets` gives its target).
+    With ``only``, the plan drives those nodes alone (in the same order; other steps are left out).
     """
     steps: list[Step] = []
     seen: set[str] = set()
@@ -158,6 +160,8 @@ def build_plan(model: Model, run: Run, part: str, target: StateMode) -> tuple[Jo
         seen.add(name)
         spec = model.parts[name]
         if isinstance(spec, NodePart):
+            if only is not None and name not in only:
+                continue
             mode = spec.modes[value.mode or spec.default_mode] if value.state is State.ACTIVE else None
             step = Step(run, name, Goal(value.state, mode))
             steps.append(step)
