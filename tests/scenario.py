@@ -625,7 +625,9 @@ class _Runner:
                   or self.backend.node(node).state is State.FINALIZED or "shutdown" in self.backend.in_flight(node)}
         # A node restarted by the healing whose report is still on its way (report_delay) is gone
         # as far as the manager can know: a request made now may be refused for it.
-        unseen = {node for node in needed if self.manager.observation(node).gone}
+        # Likewise a node the manager still sees finalized.
+        unseen = {node for node in needed if self.manager.observation(node).gone
+                  or self.manager.observation(node).state is State.FINALIZED}
         request = self.request(final, FINAL_TIMEOUT)
         self.advance(self.clock.now() + FINAL_TIMEOUT + 1.0, stop=lambda: request.done)
         missing = [node for node, wanted in needed.items()

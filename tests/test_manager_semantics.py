@@ -284,3 +284,13 @@ def test_a_set_answered_but_not_yet_reported_is_waited_for_before_judging_the_mo
     rig.run(0.2)
     assert rig.state("controller_server") == "active.__DEFAULT__"
     assert rig.backend.node("controller_server").parameters["FollowPath.max_vel_x"] == 0.3
+
+
+def test_a_request_that_needs_a_finalized_node_is_refused_and_changes_nothing() -> None:
+    rig = Rig(bundled("pilot"), rules=False, recovery=False, initial_state={"amcl": "finalized"})
+    request = rig.manager.change_mode("pilot", "f_normal_mode")
+    assert request.done and request.reason == "amcl is finalized (it must be restarted)"
+    assert rig.manager.target("pilot") is None
+    assert not [e for e in rig.backend.events if e.kind == "request"], "no node was touched"
+    # A mode that does not need amcl is fine.
+    assert rig.finish(rig.manager.change_mode("controller_server", "FAST")).succeeded

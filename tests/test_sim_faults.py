@@ -104,7 +104,7 @@ def test_hang_next_never_completes() -> None:
     backend.change_state("amcl", T.UNCONFIGURED_SHUTDOWN, later.append)
     backend.clock.advance(1.0)
     assert later == [CallResult(False, "shutdown of amcl refused: cannot shutdown while configuring "
-                                       "(a transition is in progress)")]
+                                       "(a transition is in progress)", refused=True)]
     assert "configure hangs in configuring: no response" in faults(backend, "amcl")
 
 

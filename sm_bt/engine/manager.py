@@ -327,10 +327,10 @@ class ModeManager:
                timeout: float | None, transition: Transition | None = None) -> Request:
         implied = implied_targets(self.model, part, target)
         scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
-        gone = sorted(n for n in scope if self._inference.observation(n).gone)
-        if gone and origin is Origin.USER:  # refused as a whole: nothing is changed
-            why = "; ".join(f"{n} is not reachable ({self._inference.observation(n).gone})" for n in gone)
-            return self._refuse(part, description, why)
+        if origin is Origin.USER:
+            why = "; ".join(filter(None, (self._out_of_reach(n, t) for n, t in implied if n in scope)))
+            if why:  # refused as a whole: nothing is changed
+                return self._refuse(part, description, why)
         request = Request(part, target, description, origin, self.clock.now(), withdraw=self._withdraw)
         # A rule's or recovery's request follows its own log line: the start is detail then.
         (log.info if origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id, description,
@@ -347,6 +347,15 @@ class ModeManager:
             if execution.scope - scope:
                 self._continue(execution, execution.scope - scope)
         return request
+
+    def _out_of_reach(self, node: str, target: StateMode) -> str:
+        """Why ``node`` cannot be taken to ``target`` as far as the manager knows ("" if it can)."""
+        obs = self._inference.observation(node)
+        if obs.gone:
+            return f"{node} is not reachable ({obs.gone})"
+        if obs.state is State.FINALIZED and target.state is not State.FINALIZED:
+            return f"{node} is finalized (it must be restarted)"
+        return ""
 
     def _continue(self, preempted: Execution, nodes: frozenset[str]) -> None:
         """Carry on with ``nodes`` of a preempted request: their targets are still what it asked."""
