@@ -22,7 +22,7 @@ holds the scenario as Python, ready to paste into ``test_manager_regressions.py`
 * **I4** when nothing moves a node but the manager (no trigger, set_parameter, crash or restart
   step), no request fails with "cannot X while Y": a refusal caused by the manager's own call.
 * **I5** at the end, the manager observed every running node's true state and parameters, and a
-  fresh :class:`~sm_bt.engine.inference.Inference` fed the same observations and targets infers
+  reference :func:`~sm_bt.engine.inference.infer_all` (infer_node/infer_system, from scratch) infers
   the same actual for every part (incremental inference equals inference from scratch).
 * **I6** recovery ends: after healing, within bounded virtual time, no request is in flight and
   none starts during a quiet period; between two user requests, recovery restores a part at most
@@ -60,7 +60,7 @@ from sm_bt.behaviours import ChangeMode as ChangeModeBehaviour
 from sm_bt.behaviours import ChangeState as ChangeStateBehaviour
 from sm_bt.behaviours import HoldMode, WaitForMode, hold_mode
 from sm_bt.engine.events import Event, EventKind
-from sm_bt.engine.inference import Inference
+from sm_bt.engine.inference import infer_all
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Outcome, transition_by_label
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Origin, Request
@@ -470,9 +470,20 @@ class _Runner:
                                           f"last user request (recovery_attempts={self.options.recovery_attempts}, "
                                           "not on target for recovery_window in between)")
 
-    def _restarted(self, node: str) -> None:
-        if RESTART_RENEWS_BUDGET:
+    def _restart(self, node: str, state: str | None = None, *, renew: bool = RESTART_RENEWS_BUDGET) -> None:
+        """Restart ``node``; with ``renew``, its budget is whole again once the manager can know it."""
+        backend = self.backend
+
+        def renewed() -> None:
             self.budgets[node].count = 0
+
+        if renew and backend.report_delay == 0:
+            renewed()  # first: the manager may react from inside restart()
+        backend.restart(node, state)
+        if renew and backend.report_delay > 0:
+            # The manager learns of the new process from its appearance report, which the clock
+            # runs before this (the same delay, scheduled earlier).
+            self.clock.call_later(backend.report_delay, renewed)
 
     def _violate(self, kind: type[InvariantViolation], message: str) -> None:
         if not any(type(v) is kind and v.args[0] == message for v in self.violations):
@@ -546,8 +557,7 @@ class _Runner:
             if backend.status(action.node) is NodeStatus.RUNNING:
                 backend.crash(action.node)
         elif isinstance(action, Restart):
-            self._restarted(action.node)
-            backend.restart(action.node, None if backend.is_plain(action.node) else action.state)
+            self._restart(action.node, None if backend.is_plain(action.node) else action.state)
         elif isinstance(action, RejectParameters):
             backend.reject_parameters(action.node, action.reason)
         elif backend.is_plain(action.node):
@@ -594,8 +604,7 @@ class _Runner:
         backend.clear_faults()
         for node in backend.nodes:
             if backend.status(node) is not NodeStatus.RUNNING or node in backend.hung():
-                self.budgets[node].count = 0  # first: the manager may react from inside restart()
-                backend.restart(node)
+                self._restart(node, renew=True)
 
     def settle(self, when: str) -> bool:
         """Run until no request is in flight and none starts for a quiet period; a violation of I6
@@ -729,7 +738,6 @@ class _Runner:
 
     def check_observations(self) -> None:
         manager, backend = self.manager, self.backend
-        fresh = Inference(self.model)
         for node in backend.nodes:
             observation = manager.observation(node)
             if backend.status(node) is NodeStatus.RUNNING:
@@ -739,16 +747,14 @@ class _Runner:
                 if seen != truth:
                     self._violate(I5Inference, f"{node}: the manager observed (reachable, state, parameters, "
                                                f"lifecycle) {seen}, the node is {truth}")
-            if observation.seen:
-                fresh.node_appeared(node, observation.state, observation.parameters, observation.lifecycle)
-            if observation.gone:
-                fresh.node_vanished(node, observation.gone)
+        # From scratch with the reference functions (infer_node/infer_system, no tallies).
+        observations = {node: manager.observation(node) for node in backend.nodes}
+        targets = {part: t for part in self.model.parts if (t := manager.target(part)) is not None}
+        fresh = infer_all(self.model, observations, targets)
         for part in self.model.parts:
-            fresh.set_target(part, manager.target(part))
-        for part in self.model.parts:
-            if fresh.actual(part) != manager.actual(part):
+            if fresh[part] != manager.actual(part):
                 self._violate(I5Inference, f"{part}: the manager infers {manager.actual(part)!r}, inference "
-                                           f"from scratch {fresh.actual(part)!r}")
+                                           f"from scratch {fresh[part]!r}")
 
     # -- statistics --------------------------------------------------------------------------------
 

@@ -321,6 +321,26 @@ def test_a_finalized_node_restarted_at_the_instant_of_a_request_may_be_refused_f
         final_delay=0.0,
     ))
 
+
+def test_a_budget_renewed_by_a_restart_counts_from_when_the_manager_learns_of_it() -> None:
+    """laser_resender restarts twice at one instant, its appearances 5 ms late: each appearance
+    renews its budget in the manager, so two restores are right; the invariant counted the
+    renewal from the restart itself, before the manager could know (I6, a test-side fix)."""
+    check(Scenario(
+        model="pilot_rules",
+        manager=ManagerOptions(grace_period=0.0, request_timeout=7.0, recovery_attempts=1, rules=False),
+        sim=SimOptions(error_delay=0.0, parameter_delay=0.05, vanish_after=3.0,
+                       initial_state=(("laser_resender", "inactive"), ("amcl", "unconfigured")),
+                       late=(("controller_server", 1.9),), report_delay=0.005),
+        steps=(
+            Step(0.05, Restart(node="laser_resender", state="active")),
+            Step(0.05, ChangeMode(part="pilot", mode="f_performance_mode")),
+            Step(0.05, Restart(node="laser_resender")),
+        ),
+        final=ChangeMode(part="controller_server", mode="FAST"),
+        final_delay=0.1,
+    ))
+
 CASCADE_MODEL = """\
 s0:
   ros__parameters:

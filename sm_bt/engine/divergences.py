@@ -52,17 +52,21 @@ class Divergences:
         self._busy: dict[str, int] = {}  # (request, node) pairs in flight at or below each part
         self._faulty: set[str] = set()  # off target by itself, or with a fault below
         self._chosen: dict[str, Origin] = {}  # who set a part's target for it (not through a system above)
+        # Per system: its parts that are faulty or were re-targeted by a rule (a fault below).
+        self._blamed: dict[str, int] = dict.fromkeys(hierarchy.parents.keys(), 0)
         self._notes: dict[str, str] = {}  # what the manager adds to the reason (recovery gave up)
         self._dirty: set[str] = set()
+        self._queue: list[tuple[int, str]] = []  # the dirty parts by height (children first)
         self._grace: list[tuple[float, str]] = []  # (due, part), a heap; stale entries are skipped
 
     # -- what changed (from the manager) ---------------------------------------------------------
 
     def touch(self, part: str) -> None:
-        """``part``'s actual, target or circumstances changed: re-examine it and its systems."""
+        """``part``'s actual, target or circumstances changed: re-examine it (its systems follow
+        when that changes what they see of it)."""
         if part not in self._dirty:
             self._dirty.add(part)
-            self._dirty.update(self._hierarchy.ancestors[part])
+            heapq.heappush(self._queue, (self._hierarchy.height[part], part))
 
     @property
     def pending(self) -> bool:
@@ -83,11 +87,24 @@ class Divergences:
     def chosen(self, part: str, origin: Origin | None) -> None:
         """Who last set ``part``'s target for the part itself (a user, or one of its rules);
         ``None`` when it came with the target of a system above."""
+        blamed = self._to_blame(part)
         if origin is None:
             self._chosen.pop(part, None)
         else:
             self._chosen[part] = origin
+        self._reblame(part, blamed)
         self.touch(part)
+
+    def _to_blame(self, part: str) -> bool:
+        return part in self._faulty or self._chosen.get(part) is Origin.RULE
+
+    def _reblame(self, part: str, before: bool) -> None:
+        """``part`` was (``before``) or is now a fault below its systems: tell them if that changed."""
+        after = self._to_blame(part)
+        if after != before:
+            for parent in self._hierarchy.parents[part]:
+                self._blamed[parent] += 1 if after else -1
+                self.touch(parent)
 
     def chosen_by(self, part: str) -> Origin | None:
         return self._chosen.get(part)
@@ -120,11 +137,11 @@ class Divergences:
     def evaluate(self, now: float) -> tuple[list[Change], list[Divergence]]:
         """Re-examine what changed: the divergences that started, ended or changed, and every
         re-examined divergence that is a ``FAULT`` (children before their systems)."""
-        height = self._hierarchy.height
-        dirty, self._dirty = sorted(self._dirty, key=height.__getitem__), set()
         changes: list[Change] = []
         faults: list[Divergence] = []
-        for part in dirty:
+        while self._queue:
+            part = heapq.heappop(self._queue)[1]
+            self._dirty.discard(part)
             new = self._examine(part, now)
             old = self.records.get(part)
             if new is None:
@@ -145,15 +162,14 @@ class Divergences:
         target = self._inference.target(part)
         actual = self._inference.actual(part)
         on_target = target is None or (actual.known and actual.state_mode == target)
-        spec = self._model.parts[part]
-        if isinstance(spec, SystemPart):
-            faulty = any(c in self._faulty or self._chosen.get(c) is Origin.RULE for c in spec.parts)
-        else:
-            faulty = not on_target
-        if faulty:
-            self._faulty.add(part)
-        else:
-            self._faulty.discard(part)
+        faulty = self._blamed[part] > 0 if isinstance(self._model.parts[part], SystemPart) else not on_target
+        if faulty != (part in self._faulty):
+            blamed = self._to_blame(part)
+            if faulty:
+                self._faulty.add(part)
+            else:
+                self._faulty.discard(part)
+            self._reblame(part, blamed)
         if target is None or on_target:
             self._since.pop(part, None)
             return None

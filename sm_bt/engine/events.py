@@ -65,18 +65,32 @@ class Event:
     before its target changed (the state a change starts from). ``transition`` (``TARGET`` events)
     is the lifecycle transition asked of the part: the one requested by ``change_state``, or the
     first step from ``previous`` towards the new target's state; ``None`` when the state stays.
+    ``message`` says it in one line (made when read: most events are never printed).
     """
 
     kind: EventKind
     part: str
     time: float
-    message: str
+    text: str = ""  # the message, where the fields do not tell it
     actual: Actual | None = None
     target: StateMode | None = None
     divergence: Divergence | None = None
     request: Request | None = None
     previous: Actual | None = None
     transition: Transition | None = None
+
+    @property
+    def message(self) -> str:
+        if self.text:
+            return self.text
+        if self.kind is EventKind.ACTUAL:
+            return f"{self.part}: {self.previous} -> {self.actual}"
+        if self.kind is EventKind.TARGET:
+            return f"target {self.target}"
+        if self.kind is EventKind.DIVERGENCE:
+            return str(self.divergence) if self.divergence is not None else \
+                f"{self.part} is back on target {self.target}"
+        return ""
 
 
 Observer = Callable[[Event], None]
@@ -120,8 +134,7 @@ class Outbox:
             self._queue.append(slot)
             return
         assert slot is not None
-        merged = replace(told, actual=event.actual, time=event.time,
-                         message=f"{event.part}: {told.previous} -> {event.actual}")
+        merged = replace(told, actual=event.actual, time=event.time)
         slot[0] = None if merged.previous == merged.actual else merged
 
     def pop(self) -> Event | None:

@@ -13,53 +13,14 @@ it, and returns only the parts whose result changed.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 
+from sm_bt.engine.actual import Actual, NodeObservation
 from sm_bt.engine.hierarchy import Hierarchy
+from sm_bt.engine.tallies import MOVING_TO, Tally, first_difference, system_mode_matches, untargeted_mismatch
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model, NodePart, ParamValue, SystemPart
 
-
-@dataclass(frozen=True)
-class Actual:
-    """The actual state and mode of a part, and how they were obtained.
-
-    ``state_inferred``/``mode_inferred`` say whether a value was computed (the monitor's ``(*)``)
-    rather than reported by a node. ``reason`` explains an ``unknown`` state or a missing mode.
-    """
-
-    part: str
-    state: State
-    mode: str | None = None
-    state_inferred: bool = True
-    mode_inferred: bool = True
-    reason: str = ""
-
-    @property
-    def state_mode(self) -> StateMode:
-        return StateMode(self.state, self.mode)
-
-    @property
-    def known(self) -> bool:
-        return self.state is not State.UNKNOWN
-
-    def __str__(self) -> str:
-        return str(self.state_mode)
-
-
-@dataclass
-class NodeObservation:
-    """Everything reported about one node so far."""
-
-    seen: bool = False
-    state: State = State.UNKNOWN
-    parameters: dict[str, ParamValue] = field(default_factory=dict)
-    lifecycle: bool = True
-    gone: str = ""  # why the node is not reachable now ("" while reachable or never seen)
-
-    @property
-    def reachable(self) -> bool:
-        return self.seen and not self.gone
+__all__ = ["Actual", "Changes", "Inference", "NodeObservation", "infer_all", "infer_node", "infer_system"]
 
 
 Changes = dict[str, tuple[Actual, Actual]]
@@ -99,29 +60,6 @@ def _mode_mismatch(part: NodePart, parameters: Mapping[str, ParamValue]) -> str:
     return f"parameters match no mode ({shown})"
 
 
-def _entry_matches(entry_target: StateMode | None, actual: Actual) -> bool:
-    return entry_target is None or (actual.known and actual.state_mode == entry_target)
-
-
-def _system_mode_matches(part: SystemPart, mode: str, actual_of: Callable[[str], Actual]) -> bool:
-    return all(_entry_matches(e.target, actual_of(e.part)) for e in part.modes[mode].entries.values())
-
-
-def _first_difference(part: SystemPart, mode: str, actual_of: Callable[[str], Actual]) -> str:
-    for entry in part.modes[mode].entries.values():
-        actual = actual_of(entry.part)
-        if not _entry_matches(entry.target, actual):
-            return f"{entry.part} is {actual}, {mode} wants {entry.target}"
-    return ""
-
-
-#: The state a system shows while its parts move towards a non-active target state.
-_MOVING_TO = {
-    State.UNCONFIGURED: State.CLEANINGUP,
-    State.FINALIZED: State.SHUTTINGDOWN,
-}
-
-
 def infer_system(part: SystemPart, actual_of: Callable[[str], Actual], target: StateMode | None) -> Actual:
     actuals = [actual_of(name) for name in part.parts]
     for actual in actuals:
@@ -141,17 +79,17 @@ def infer_system(part: SystemPart, actual_of: Callable[[str], Actual], target: S
         return _infer_untargeted(part, actual_of, actuals)
     if target.state is State.ACTIVE:
         wanted = target.mode if target.mode is not None and target.mode in part.modes else part.default_mode
-        if _system_mode_matches(part, wanted, actual_of):
+        if system_mode_matches(part, wanted, actual_of):
             return Actual(part.name, State.ACTIVE, wanted)
         # Still on the way: report the first mode (byte-wise) the parts do match, as the reference.
         for name in sorted(part.modes):
-            if name != wanted and _system_mode_matches(part, name, actual_of):
-                return Actual(part.name, State.ACTIVATING, name, reason=_first_difference(part, wanted, actual_of))
-        return Actual(part.name, State.ACTIVATING, reason=_first_difference(part, wanted, actual_of))
+            if name != wanted and system_mode_matches(part, name, actual_of):
+                return Actual(part.name, State.ACTIVATING, name, reason=first_difference(part, wanted, actual_of))
+        return Actual(part.name, State.ACTIVATING, reason=first_difference(part, wanted, actual_of))
 
     if all(a.state is target.state for a in actuals):
         return Actual(part.name, target.state)
-    moving = _MOVING_TO.get(target.state)
+    moving = MOVING_TO.get(target.state)
     if moving is None:  # target inactive: coming down from active, or up from unconfigured
         going_down = any(a.state in (State.ACTIVE, State.ACTIVATING, State.DEACTIVATING) for a in actuals)
         moving = State.DEACTIVATING if going_down else State.CONFIGURING
@@ -165,16 +103,18 @@ def _infer_untargeted(part: SystemPart, actual_of: Callable[[str], Actual], actu
     if len(states) == 1 and State.ACTIVE not in states:
         return Actual(part.name, states.pop())
     for name in [part.default_mode, *sorted(part.modes)]:
-        if _system_mode_matches(part, name, actual_of):
+        if system_mode_matches(part, name, actual_of):
             return Actual(part.name, State.ACTIVE, name)
-    shown = ", ".join(f"{a.part} {a}" for a in actuals)
-    if states == {State.ACTIVE}:
-        return Actual(part.name, State.ACTIVE, reason=f"parts match no mode ({shown})")
-    return Actual(part.name, State.UNKNOWN, reason=f"parts match no mode and no target is set ({shown})")
+    return untargeted_mismatch(part, actual_of, states)
 
 
 class Inference:
-    """Keeps node observations and targets, and the inferred actual of every part up to date."""
+    """Keeps node observations and targets, and the inferred actual of every part up to date.
+
+    Systems are inferred from a :class:`~sm_bt.engine.tallies.Tally` of their parts (the same
+    answer as :func:`infer_system`, in time independent of their size), and an update climbs only
+    as far as something changed.
+    """
 
     def __init__(self, model: Model, hierarchy: Hierarchy | None = None) -> None:
         self.model = model
@@ -182,7 +122,11 @@ class Inference:
         self._observations = {node.name: NodeObservation() for node in model.nodes}
         self._targets: dict[str, StateMode] = {}
         self._actual: dict[str, Actual] = {}
+        self._tallies: dict[str, Tally] = {}
         for name in self._hierarchy.bottom_up:
+            part = model.parts[name]
+            if isinstance(part, SystemPart):
+                self._tallies[name] = Tally(part, self._actual.__getitem__)
             self._actual[name] = self._compute(name)
 
     # -- queries -----------------------------------------------------------------------------
@@ -225,19 +169,41 @@ class Inference:
         return self._recompute(node)
 
     def _recompute(self, part: str) -> Changes:
-        """``part`` and the systems above it, bottom-up (nothing else can have changed)."""
+        """``part``, then the systems above it that see a change, bottom-up."""
         changes: Changes = {}
+        pending = {part}
         for name in (part, *self._hierarchy.ancestors[part]):
+            if name not in pending:
+                continue
             new = self._compute(name)
             old = self._actual[name]
             if new != old:
                 self._actual[name] = new
                 changes[name] = (old, new)
+                for parent in self._hierarchy.parents[name]:
+                    self._tallies[parent].update(name, old, new)
+                    pending.add(parent)
         return changes
 
     def _compute(self, name: str) -> Actual:
-        part = self.model.parts[name]
         target = self._targets.get(name)
+        tally = self._tallies.get(name)
+        if tally is not None:
+            return tally.infer(target, self._actual.__getitem__)
+        part = self.model.parts[name]
+        assert isinstance(part, NodePart)
+        return infer_node(part, self._observations[name], target)
+
+
+def infer_all(model: Model, observations: Mapping[str, NodeObservation],
+              targets: Mapping[str, StateMode]) -> dict[str, Actual]:
+    """Every part's actual from scratch, with :func:`infer_node`/:func:`infer_system` (the
+    reference the incremental :class:`Inference` must agree with)."""
+    actual: dict[str, Actual] = {}
+    for name in Hierarchy.of(model).bottom_up:
+        part = model.parts[name]
         if isinstance(part, NodePart):
-            return infer_node(part, self._observations[name], target)
-        return infer_system(part, self._actual.__getitem__, target)
+            actual[name] = infer_node(part, observations[name], targets.get(name))
+        else:
+            actual[name] = infer_system(part, actual.__getitem__, targets.get(name))
+    return actual

@@ -87,6 +87,11 @@ class ModeManager:
         self._reactions = Reactions(model, self._hierarchy, attempts=recovery_attempts, window=recovery_window,
                                     rules=rules, recovery=recovery)
         self._drivers = {node.name: NodeDriver(node.name, _DriverIO(self)) for node in model.nodes}
+        # The parts whose rules look at each part: a change of it may make one of them apply.
+        self._watchers: dict[str, list[str]] = {}
+        for spec in model.parts.values():
+            for rule in spec.rules:
+                self._watchers.setdefault(rule.if_part, []).append(rule.system)
         self._executions: dict[int, Execution] = {}
         self._confirming: dict[str, set[Execution]] = {}  # part -> executions waiting for its actual
         self._last_mode: dict[str, str] = {}  # the last active mode asked for, kept over deactivation
@@ -405,7 +410,7 @@ class ModeManager:
         before = self._inference.actual(part)
         if transition is None and target is not None:
             transition = first_transition(before.state, target.state)
-        self._emit(EventKind.TARGET, part, f"target {target}", target=target, previous=before, transition=transition)
+        self._emit(EventKind.TARGET, part, target=target, previous=before, transition=transition)
         self._divergences.touch(part)
         self._apply(self._inference.set_target(part, target))
 
@@ -521,7 +526,8 @@ class ModeManager:
                 self._settle()
                 while (event := self._outbox.pop()) is not None:
                     self._notify(event)
-                    self._settle()
+                    if self._agenda or self._divergences.pending:  # an observer called in
+                        self._settle()
             finally:
                 self._depth -= 1
 
@@ -550,14 +556,14 @@ class ModeManager:
         if new is None:
             self._reported.discard(part)
             self._reactions.back_on_target(part, now)
-            self._emit(EventKind.DIVERGENCE, part, f"{part} is back on target {self._inference.target(part)}")
+            self._emit(EventKind.DIVERGENCE, part, target=self._inference.target(part))
             return
         if new.is_error and part not in self._reported:  # once per divergence, not per attempt
             self._reported.add(part)
             why = f": {new.reason}" if new.reason else ""
             log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s%s).",
                         part, new.target, new.actual, new.cause.value, why)
-        self._emit(EventKind.DIVERGENCE, part, str(new), divergence=new)
+        self._emit(EventKind.DIVERGENCE, part, divergence=new)
 
     def _schedule_grace(self) -> None:
         """One timer, for the earliest grace period still running (a timer that fires for a grace
@@ -584,18 +590,19 @@ class ModeManager:
                 except Exception:  # an observer's bug must not break the manager
                     log.exception("observer %r failed on %s", subscription.callback, event.kind.value)
 
-    def _emit(self, kind: EventKind, part: str, message: str, *, target: StateMode | None = None,
+    def _emit(self, kind: EventKind, part: str, text: str = "", *, target: StateMode | None = None,
               divergence: Divergence | None = None, request: Request | None = None,
               previous: Actual | None = None, transition: Transition | None = None) -> None:
         actual = self._inference.actual(part) if part in self.model.parts else None
-        self._outbox.put(Event(kind, part, self.clock.now(), message, actual=actual, target=target,
+        self._outbox.put(Event(kind, part, self.clock.now(), text, actual=actual, target=target,
                                divergence=divergence, request=request, previous=previous, transition=transition))
 
     def _apply(self, changes: Changes) -> None:
         for part, (old, new) in changes.items():
-            self._outbox.actual(Event(EventKind.ACTUAL, part, self.clock.now(), f"{part}: {old} -> {new}",
-                                      actual=new, previous=old))
+            self._outbox.actual(Event(EventKind.ACTUAL, part, self.clock.now(), actual=new, previous=old))
             self._divergences.touch(part)
+            for watcher in self._watchers.get(part, ()):
+                self._divergences.touch(watcher)
             for execution in list(self._confirming.get(part, ())):
                 self.confirm(execution)
 

@@ -1,0 +1,50 @@
+"""What the engine knows of a part (:class:`Actual`) and of a node (:class:`NodeObservation`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from sm_bt.model.states import State, StateMode
+from sm_bt.model.types import ParamValue
+
+
+@dataclass(frozen=True)
+class Actual:
+    """The actual state and mode of a part, and how they were obtained.
+
+    ``state_inferred``/``mode_inferred`` say whether a value was computed (the monitor's ``(*)``)
+    rather than reported by a node. ``reason`` explains an ``unknown`` state or a missing mode.
+    """
+
+    part: str
+    state: State
+    mode: str | None = None
+    state_inferred: bool = True
+    mode_inferred: bool = True
+    reason: str = ""
+
+    @property
+    def state_mode(self) -> StateMode:
+        return StateMode(self.state, self.mode)
+
+    @property
+    def known(self) -> bool:
+        return self.state is not State.UNKNOWN
+
+    def __str__(self) -> str:
+        return str(self.state_mode)
+
+
+@dataclass
+class NodeObservation:
+    """Everything reported about one node so far."""
+
+    seen: bool = False
+    state: State = State.UNKNOWN
+    parameters: dict[str, ParamValue] = field(default_factory=dict)
+    lifecycle: bool = True
+    gone: str = ""  # why the node is not reachable now ("" while reachable or never seen)
+
+    @property
+    def reachable(self) -> bool:
+        return self.seen and not self.gone

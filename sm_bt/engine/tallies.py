@@ -1,0 +1,147 @@
+"""Running counts of what a system's parts are, so that inferring the system costs O(its modes).
+
+:func:`~sm_bt.engine.inference.infer_system` looks at every part of a system every time. A
+:class:`Tally` keeps, per system, how many entries of each mode its parts do not match, how many
+parts are in each lifecycle state, and which parts are unknown; one part's change updates those
+counts in O(the modes that name the part), and :meth:`Tally.infer` gives the same answer as
+``infer_system`` (which stays the reference: the tests compare the two). Only the reasons of a
+system on its way somewhere are written by looking at the parts again: a settled system costs
+O(1).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+
+from sm_bt.engine.actual import Actual
+from sm_bt.model.states import State, StateMode
+from sm_bt.model.types import SystemPart
+
+#: The state a system shows while its parts move towards a non-active target state.
+MOVING_TO = {
+    State.UNCONFIGURED: State.CLEANINGUP,
+    State.FINALIZED: State.SHUTTINGDOWN,
+}
+_GOING_DOWN = (State.ACTIVE, State.ACTIVATING, State.DEACTIVATING)
+
+
+def entry_matches(entry_target: StateMode | None, actual: Actual) -> bool:
+    """A part's actual meets a system mode's entry for it (a don't-care entry always does)."""
+    if entry_target is None:
+        return True
+    if actual.state is State.UNKNOWN or actual.state is not entry_target.state:
+        return False
+    return entry_target.mode == (actual.mode if actual.state is State.ACTIVE else None)
+
+
+def system_mode_matches(part: SystemPart, mode: str, actual_of: Callable[[str], Actual]) -> bool:
+    return all(entry_matches(e.target, actual_of(e.part)) for e in part.modes[mode].entries.values())
+
+
+def first_difference(part: SystemPart, mode: str, actual_of: Callable[[str], Actual]) -> str:
+    """Why the parts do not match ``mode``: its first entry they do not meet."""
+    for entry in part.modes[mode].entries.values():
+        actual = actual_of(entry.part)
+        if not entry_matches(entry.target, actual):
+            return f"{entry.part} is {actual}, {mode} wants {entry.target}"
+    return ""
+
+
+def untargeted_mismatch(part: SystemPart, actual_of: Callable[[str], Actual], states: set[State]) -> Actual:
+    """A system with no target whose parts match none of its modes."""
+    shown = ", ".join(f"{a.part} {a}" for a in map(actual_of, part.parts))
+    if states == {State.ACTIVE}:
+        return Actual(part.name, State.ACTIVE, reason=f"parts match no mode ({shown})")
+    return Actual(part.name, State.UNKNOWN, reason=f"parts match no mode and no target is set ({shown})")
+
+
+class Tally:
+    """The counts of one system; :meth:`update` them on each change of a part, then :meth:`infer`."""
+
+    __slots__ = ("_by_part", "_mismatch", "_modes_sorted", "_size", "_states", "_unknown", "system")
+
+    def __init__(self, system: SystemPart, actual_of: Callable[[str], Actual]) -> None:
+        self.system = system
+        self._size = len(system.parts)
+        self._modes_sorted = sorted(system.modes)
+        # part -> (mode name, entry target, the entry's place in the mode) for each entry that names
+        # it (don't-care entries name nothing).
+        self._by_part: dict[str, list[tuple[str, StateMode, int]]] = {part: [] for part in system.parts}
+        for name, mode in system.modes.items():
+            for place, entry in enumerate(mode.entries.values()):
+                if entry.target is not None:
+                    self._by_part.setdefault(entry.part, []).append((name, entry.target, place))
+        # mode -> {place of an entry its part does not meet: that part}
+        self._mismatch: dict[str, dict[int, str]] = {name: {} for name in system.modes}
+        self._states: Counter[State] = Counter()
+        self._unknown: set[str] = set()
+        for part in system.parts:
+            self._add(part, actual_of(part))
+
+    def update(self, part: str, old: Actual, new: Actual) -> None:
+        """``part``'s actual went from ``old`` to ``new``."""
+        self._states[old.state] -= 1
+        if old.state is State.UNKNOWN:
+            self._unknown.discard(part)
+        self._add(part, new)
+
+    def _add(self, part: str, actual: Actual) -> None:
+        state = actual.state
+        self._states[state] += 1
+        if state is State.UNKNOWN:
+            self._unknown.add(part)
+        mode = actual.mode if state is State.ACTIVE else None
+        for name, entry, place in self._by_part.get(part, ()):
+            mismatch = self._mismatch[name]
+            if state is entry.state and state is not State.UNKNOWN and mode == entry.mode:
+                mismatch.pop(place, None)
+            else:
+                mismatch[place] = part
+
+    def infer(self, target: StateMode | None, actual_of: Callable[[str], Actual]) -> Actual:
+        """What ``infer_system`` would say, from the counts."""
+        system = self.system
+        if self._states[State.ERRORPROCESSING]:
+            failing = next(p for p in system.parts if actual_of(p).state is State.ERRORPROCESSING)
+            return Actual(system.name, State.ERRORPROCESSING, reason=f"{failing} is in errorprocessing")
+        if self._unknown:
+            relevant = system.parts
+            if target is not None and target.mode is not None and target.mode in system.modes:
+                relevant = tuple(e.part for e in system.modes[target.mode].entries.values() if not e.dont_care)
+            unknown = [actual_of(p) for p in relevant if p in self._unknown]
+            if unknown:
+                why = "; ".join(f"{a.part}: {a.reason or 'unknown'}" for a in unknown)
+                return Actual(system.name, State.UNKNOWN, reason=f"part state unknown ({why})")
+        if target is None:
+            return self._untargeted(actual_of)
+        if target.state is State.ACTIVE:
+            wanted = target.mode if target.mode is not None and target.mode in system.modes else system.default_mode
+            missing = self._mismatch[wanted]
+            if not missing:
+                return Actual(system.name, State.ACTIVE, wanted)
+            first = missing[min(missing)]
+            entry = system.modes[wanted].entries[first]
+            reason = f"{first} is {actual_of(first)}, {wanted} wants {entry.target}"
+            for name in self._modes_sorted:
+                if name != wanted and not self._mismatch[name]:
+                    return Actual(system.name, State.ACTIVATING, name, reason=reason)
+            return Actual(system.name, State.ACTIVATING, reason=reason)
+        if self._states[target.state] == self._size:
+            return Actual(system.name, target.state)
+        moving = MOVING_TO.get(target.state)
+        if moving is None:  # target inactive: coming down from active, or up from unconfigured
+            going_down = any(self._states[state] for state in _GOING_DOWN)
+            moving = State.DEACTIVATING if going_down else State.CONFIGURING
+        lagging = next(a for a in map(actual_of, system.parts) if a.state is not target.state)
+        return Actual(system.name, moving, reason=f"{lagging.part} is {lagging.state.label}")
+
+    def _untargeted(self, actual_of: Callable[[str], Actual]) -> Actual:
+        system = self.system
+        present = [state for state, count in self._states.items() if count > 0]
+        if len(present) == 1 and present[0] is not State.ACTIVE:
+            return Actual(system.name, present[0])
+        for name in [system.default_mode, *self._modes_sorted]:
+            if not self._mismatch[name]:
+                return Actual(system.name, State.ACTIVE, name)
+        return untargeted_mismatch(system, actual_of, set(present))
