@@ -47,7 +47,7 @@ import contextlib
 import logging
 import re
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -59,13 +59,14 @@ from py_trees.common import Status
 from sm_bt.behaviours import ChangeMode as ChangeModeBehaviour
 from sm_bt.behaviours import ChangeState as ChangeStateBehaviour
 from sm_bt.behaviours import HoldMode, WaitForMode, hold_mode
+from sm_bt.engine.backend import BackendListener, NodeReport
 from sm_bt.engine.events import Event, EventKind
 from sm_bt.engine.inference import infer_all
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Outcome, transition_by_label
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import DEFAULT_MODE, Model, NodePart
+from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue
 from sm_bt.sim import NodeStatus, SimBackend
 
 #: Period of the tree's ticks, in virtual seconds.
@@ -387,6 +388,32 @@ class _Budget:
     on_since: float | None = None
 
 
+class _AppearanceWatch:
+    """A backend listener that tells ``seen`` of each appearance before passing every report on."""
+
+    def __init__(self, listener: BackendListener, seen: Callable[[str], None]) -> None:
+        self._listener, self._seen = listener, seen
+
+    def node_appeared(self, node: str, report: NodeReport) -> None:
+        self._seen(node)
+        self._listener.node_appeared(node, report)
+
+    def node_state(self, node: str, state: State) -> None:
+        self._listener.node_state(node, state)
+
+    def node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> None:
+        self._listener.node_parameters(node, changed)
+
+    def node_vanished(self, node: str, reason: str) -> None:
+        self._listener.node_vanished(node, reason)
+
+
+def _watch_appearances(backend: SimBackend, seen: Callable[[str], None]) -> None:
+    """Have ``seen(node)`` called on every appearance ``backend`` reports to whoever attaches."""
+    attach = backend.attach
+    backend.attach = lambda nodes, listener: attach(nodes, _AppearanceWatch(listener, seen))  # type: ignore[method-assign]
+
+
 class _Runner:
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
@@ -411,6 +438,8 @@ class _Runner:
         self.set_by: dict[str, Origin] = {}  # who made the last request for each part (I8)
         self.targets: dict[str, StateMode | None] = {name: None for name in self.model.parts}
         self.tree: _Tree | None = None
+        self.renewing: set[str] = set()  # restarted nodes whose budget renews when they appear (I6)
+        _watch_appearances(self.backend, self._appeared)
         self.manager = ModeManager(self.model, self.backend, request_timeout=options.request_timeout,
                                    grace_period=options.grace_period, recovery_attempts=options.recovery_attempts,
                                    recovery_window=options.recovery_window, rules=options.rules,
@@ -471,19 +500,18 @@ class _Runner:
                                           "not on target for recovery_window in between)")
 
     def _restart(self, node: str, state: str | None = None, *, renew: bool = RESTART_RENEWS_BUDGET) -> None:
-        """Restart ``node``; with ``renew``, its budget is whole again once the manager can know it."""
-        backend = self.backend
+        """Restart ``node``; with ``renew``, its budget is whole again when the manager hears of the
+        new process (its appearance report, maybe ``report_delay`` later)."""
+        if renew:
+            self.renewing.add(node)
+        self.backend.restart(node, state)
 
-        def renewed() -> None:
+    def _appeared(self, node: str) -> None:
+        """The manager is about to hear that ``node`` appeared: a restarted one's budget is whole
+        again from this instant, before the manager can react (it may restore from the report)."""
+        if node in self.renewing:
+            self.renewing.discard(node)
             self.budgets[node].count = 0
-
-        if renew and backend.report_delay == 0:
-            renewed()  # first: the manager may react from inside restart()
-        backend.restart(node, state)
-        if renew and backend.report_delay > 0:
-            # The manager learns of the new process from its appearance report, which the clock
-            # runs before this (the same delay, scheduled earlier).
-            self.clock.call_later(backend.report_delay, renewed)
 
     def _violate(self, kind: type[InvariantViolation], message: str) -> None:
         if not any(type(v) is kind and v.args[0] == message for v in self.violations):

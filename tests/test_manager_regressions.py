@@ -341,6 +341,34 @@ def test_a_budget_renewed_by_a_restart_counts_from_when_the_manager_learns_of_it
         final_delay=0.1,
     ))
 
+
+def test_a_hung_node_restarted_by_the_healing_renews_its_budget_before_the_manager_reacts() -> None:
+    """amcl hangs in activating and recovery gives up on it; the healing restarts it, and the
+    manager restores it from the appearance report (5 ms later) with a renewed budget. The
+    invariant renewed the budget only after that report had been handled, and counted two restores
+    (I6, a test-side fix, found by CI: the oracle now renews as the report reaches the manager)."""
+    check(Scenario(
+        model="pilot_rules",
+        manager=ManagerOptions(grace_period=0.5, request_timeout=4.0, recovery_attempts=1),
+        sim=SimOptions(transition_delay=0.0, error_delay=0.0, parameter_delay=0.0, vanish_after=3.0,
+                       initial_state=(("amcl", "inactive"),), late=(("laser_resender", 5.2), ("amcl", 6.1)),
+                       slow=(("controller_server", 3.7),), report_delay=0.005),
+        steps=(
+            Step(30.0, ChangeMode(part="pilot", mode="__DEFAULT__")),
+            Step(67.0, Restart(node="controller_server", state="active")),
+            Step(67.0, RejectParameters(node="controller_server", reason=None)),
+            Step(67.025, ChangeState(part="laser_resender", transition="bogus")),
+            Step(67.025, ChangeState(part="pilot", transition="activate")),
+            Step(77.025, ChangeTo(part="amcl", target="active.__DEFAULT__", timeout=2.9)),
+            Step(77.025, HangNext(node="amcl", transition="activate")),
+            Step(77.025, ChangeTo(part="controller_server", target="active")),
+            Step(88.025, Trigger(node="amcl", outcome="failure", on_error="failure")),
+        ),
+        final=ChangeTo(part="controller_server", target="active.DEGRADED"),
+        final_delay=0.1,
+    ))
+
+
 CASCADE_MODEL = """\
 s0:
   ros__parameters:

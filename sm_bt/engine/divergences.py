@@ -161,7 +161,7 @@ class Divergences:
     def _examine(self, part: str, now: float) -> Divergence | None:
         target = self._inference.target(part)
         actual = self._inference.actual(part)
-        on_target = target is None or (actual.known and actual.state_mode == target)
+        on_target = target is None or actual.is_(target)
         faulty = self._blamed[part] > 0 if isinstance(self._model.parts[part], SystemPart) else not on_target
         if faulty != (part in self._faulty):
             blamed = self._to_blame(part)

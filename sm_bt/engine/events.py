@@ -5,7 +5,7 @@ from __future__ import annotations
 import enum
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 from sm_bt.engine.inference import Actual
 from sm_bt.engine.lifecycle import Transition
@@ -22,9 +22,9 @@ class Cause(str, enum.Enum):
     OVERRIDE = "override"  # parts were asked for something else directly: left alone
 
 
-@dataclass(frozen=True)
-class Divergence:
-    """A part whose actual state/mode is not its target, since ``since`` (clock seconds).
+class Divergence(NamedTuple):
+    """A part whose actual state/mode is not its target, since ``since`` (clock seconds); an
+    immutable record.
 
     ``reason`` explains it in words: what is off, or, once recovery gave up on the part, why it
     gave up (``"gave up after 3 attempts: laser_resender hung in activating for 30 s"``).
@@ -56,9 +56,8 @@ class EventKind(str, enum.Enum):
     FAILED = "failed"  # recovery gave up on a part
 
 
-@dataclass(frozen=True)
-class Event:
-    """One thing the manager tells its observers.
+class Event(NamedTuple):
+    """One thing the manager tells its observers (an immutable record).
 
     ``actual`` is the part's inferred actual when the event was made. ``previous`` is, for an
     ``ACTUAL`` event, the actual before the change; for a ``TARGET`` event, the part's actual just
@@ -134,7 +133,7 @@ class Outbox:
             self._queue.append(slot)
             return
         assert slot is not None
-        merged = replace(told, actual=event.actual, time=event.time)
+        merged = told._replace(actual=event.actual, time=event.time)
         slot[0] = None if merged.previous == merged.actual else merged
 
     def pop(self) -> Event | None:

@@ -418,7 +418,7 @@ class ModeManager:
         """The plan is done: succeed once the part's actual is the target."""
         request = execution.request
         actual = self._inference.actual(request.part)
-        if execution.continuation or (actual.known and actual.state_mode == request.target):
+        if execution.continuation or actual.is_(request.target):
             self.finish(execution, True, "")
         else:
             self._confirming.setdefault(request.part, set()).add(execution)
@@ -498,7 +498,7 @@ class ModeManager:
         for name, value in implied_targets(self.model, part, target):
             if isinstance(self.model.parts[name], NodePart) and self._unavailable(name):
                 actual = self._inference.actual(name)
-                if not (actual.known and actual.state_mode == value):
+                if not actual.is_(value):
                     return False
         return True
 

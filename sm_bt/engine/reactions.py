@@ -133,7 +133,7 @@ class Reactions:
     def _matching_rule(self, divergence: Divergence, view: View) -> Rule | None:
         for rule in self._model.parts[divergence.part].rules:
             condition = view.actual(rule.if_part)
-            if rule.if_target == divergence.target and condition.known and condition.state_mode == rule.if_part_state \
+            if rule.if_target == divergence.target and condition.is_(rule.if_part_state) \
                     and not self._users_choice(rule, view):
                 return rule
         return None
@@ -144,7 +144,7 @@ class Reactions:
         rule's system). A rule never fires against that."""
         part = rule.if_part
         target, actual = view.target(part), view.actual(part)
-        if target is None or not (actual.known and actual.state_mode == target):
+        if target is None or not actual.is_(target):
             return False
         height = self._hierarchy.height
         for chooser in (part, *self._hierarchy.ancestors[part]):
