@@ -183,3 +183,34 @@ def test_dont_care_entries_match_anything() -> None:
     inf.node_appeared("lidar", I, {"rate": 10})
     # arm never seen, but PARK does not care about it.
     assert inf.actual("robot").state_mode == active("PARK")
+
+
+def test_an_unknown_systems_reason_stays_short_however_many_parts_it_lacks() -> None:
+    """A system names three of its unknown parts and counts the rest; a system above names an
+    unknown sub-system by its reason's headline, not by the sub-system's parts (so one appearance
+    rebuilds strings of bounded length, not a reason that grows with the model)."""
+    from sm_bt.engine.inference import infer_all
+    from sm_bt.model.loader import load_model_text
+
+    def system(name: str, parts: list[str]) -> str:
+        return (f"{name}:\n  ros__parameters:\n    type: system\n    parts:\n"
+                + "".join(f"      {p}\n" for p in parts)
+                + "    modes:\n      __DEFAULT__:\n" + "".join(f"        {p}: active\n" for p in parts))
+
+    nodes = [f"n{i}" for i in range(25)]
+    text = system("root", ["s0", "s1", "s2", "s3", "s4"]) + "".join(
+        system(f"s{i}", nodes[5 * i:5 * i + 5]) for i in range(5)) + "".join(
+        f"{n}:\n  ros__parameters:\n    type: node\n    modes:\n      __DEFAULT__:\n"
+        "        ros__parameters:\n          p: 1\n" for n in nodes)
+    model = load_model_text(text, "big.yaml")
+    inference = Inference(model)
+    inference.node_appeared("n0", A, {})
+    leaf = inference.actual("s0")  # n0..n4, n0 seen
+    assert leaf.state is State.UNKNOWN
+    assert leaf.reason == "part state unknown (n1: never seen; n2: never seen; n3: never seen; 1 more)"
+    root = inference.actual("root")
+    assert root.reason == ("part state unknown (s0: part state unknown; s1: part state unknown; "
+                           "s2: part state unknown; 2 more)")
+    # The reference inference from scratch says the same.
+    observations = {node.name: inference.observation(node.name) for node in model.nodes}
+    assert infer_all(model, observations, {}) == {name: inference.actual(name) for name in model.parts}

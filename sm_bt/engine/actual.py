@@ -8,6 +8,8 @@ from typing import NamedTuple
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import ParamValue
 
+_LABELS = {state: state.label for state in State}  # State.label lowers the name on every call
+
 
 class Actual(NamedTuple):
     """The actual state and mode of a part, and how they were obtained (an immutable record).
@@ -42,7 +44,7 @@ class Actual(NamedTuple):
     def __str__(self) -> str:
         if self.state is State.ACTIVE and self.mode:
             return f"active.{self.mode}"
-        return self.state.label
+        return _LABELS[self.state]
 
 
 @dataclass

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import heapq
 from collections.abc import Iterable
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from sm_bt.engine.events import Cause, Divergence
 from sm_bt.engine.hierarchy import Hierarchy
@@ -30,8 +30,7 @@ from sm_bt.model.types import Model, SystemPart
 EPSILON = 1e-6
 
 
-@dataclass(frozen=True)
-class Change:
+class Change(NamedTuple):
     """A divergence that started (``old`` None), ended (``new`` None) or changed."""
 
     part: str
@@ -56,8 +55,11 @@ class Divergences:
         self._blamed: dict[str, int] = dict.fromkeys(hierarchy.parents.keys(), 0)
         self._notes: dict[str, str] = {}  # what the manager adds to the reason (recovery gave up)
         self._dirty: set[str] = set()
+        self._targets, self._actuals = inference.targets, inference.actuals  # read-only views
+        self._systems = frozenset(name for name, spec in model.parts.items() if isinstance(spec, SystemPart))
         self._queue: list[tuple[int, str]] = []  # the dirty parts by height (children first)
         self._grace: list[tuple[float, str]] = []  # (due, part), a heap; stale entries are skipped
+        self._grace_due: dict[str, float] = {}  # the last due pushed for each part
 
     # -- what changed (from the manager) ---------------------------------------------------------
 
@@ -119,7 +121,10 @@ class Divergences:
     def grace_over(self, now: float) -> None:
         """Mark the parts whose grace period is over by ``now``."""
         while self._grace and self._grace[0][0] <= now + EPSILON:
-            self.touch(heapq.heappop(self._grace)[1])
+            due, part = heapq.heappop(self._grace)
+            if self._grace_due.get(part) == due:
+                del self._grace_due[part]
+            self.touch(part)
 
     def next_due(self) -> float | None:
         """When the earliest grace period still running ends."""
@@ -130,6 +135,8 @@ class Divergences:
             if live and record is not None and abs(record.since + self.grace_period - due) < EPSILON:
                 return due
             heapq.heappop(self._grace)
+            if self._grace_due.get(part) == due:
+                del self._grace_due[part]
         return None
 
     # -- evaluation ------------------------------------------------------------------------------
@@ -151,37 +158,45 @@ class Divergences:
                     changes.append(Change(part, old, None))
                 continue
             self.records[part] = new
-            if old is None or (old.cause, old.actual, old.reason, old.target) != (new.cause, new.actual, new.reason,
-                                                                                 new.target):
+            if old is None or old.cause is not new.cause or old.actual != new.actual or old.reason != new.reason \
+                    or old.target != new.target:
                 changes.append(Change(part, old, new))
             if new.cause is Cause.FAULT:
                 faults.append(new)
         return changes, faults
 
     def _examine(self, part: str, now: float) -> Divergence | None:
-        target = self._inference.target(part)
-        actual = self._inference.actual(part)
+        target = self._targets.get(part)
+        actual = self._actuals[part]
         on_target = target is None or actual.is_(target)
-        faulty = self._blamed[part] > 0 if isinstance(self._model.parts[part], SystemPart) else not on_target
-        if faulty != (part in self._faulty):
-            blamed = self._to_blame(part)
+        faulty = self._blamed[part] > 0 if part in self._systems else not on_target
+        faulty_set = self._faulty
+        if faulty != (part in faulty_set):
+            # Blamed by its systems when faulty or re-targeted by a rule: a fault below them.
+            by_rule = self._chosen.get(part) is Origin.RULE
             if faulty:
-                self._faulty.add(part)
+                faulty_set.add(part)
             else:
-                self._faulty.discard(part)
-            self._reblame(part, blamed)
-        if target is None or on_target:
+                faulty_set.discard(part)
+            if not by_rule:
+                for parent in self._hierarchy.parents[part]:
+                    self._blamed[parent] += 1 if faulty else -1
+                    self.touch(parent)
+        if on_target:
             self._since.pop(part, None)
             return None
+        assert target is not None
         since = self._since.setdefault(part, now)
-        if self.is_busy(part):
+        if self._busy.get(part, 0) > 0:
             cause = Cause.IN_FLIGHT
         elif now - since < self.grace_period - EPSILON:
             cause = Cause.GRACE
-            heapq.heappush(self._grace, (since + self.grace_period, part))
+            due = since + self.grace_period
+            if self._grace_due.get(part) != due:  # each grace period once, however often examined
+                self._grace_due[part] = due
+                heapq.heappush(self._grace, (due, part))
         elif faulty:
             cause = Cause.FAULT
         else:
             cause = Cause.OVERRIDE
-        reason = self._notes.get(part) or actual.reason
-        return Divergence(part, target, actual, since, cause, reason)
+        return Divergence(part, target, actual, since, cause, self._notes.get(part) or actual.reason)

@@ -103,6 +103,7 @@ class Subscription:
         self.callback = callback
         self.parts = parts
         self.kinds = kinds
+        self.everything = parts is None and kinds is None
         self._remove = remove
 
     def wants(self, event: Event) -> bool:

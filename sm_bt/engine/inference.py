@@ -12,11 +12,19 @@ it, and returns only the parts whose result changed.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 
 from sm_bt.engine.actual import Actual, NodeObservation
 from sm_bt.engine.hierarchy import Hierarchy
-from sm_bt.engine.tallies import MOVING_TO, Tally, first_difference, system_mode_matches, untargeted_mismatch
+from sm_bt.engine.tallies import (
+    MOVING_TO,
+    Tally,
+    first_difference,
+    relevant_parts,
+    system_mode_matches,
+    unknown_reason,
+    untargeted_mismatch,
+)
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model, NodePart, ParamValue, SystemPart
 
@@ -36,7 +44,10 @@ def node_mode_candidates(part: NodePart, target: StateMode | None) -> list[str]:
     return list(dict.fromkeys(order))
 
 
-def infer_node(part: NodePart, obs: NodeObservation, target: StateMode | None) -> Actual:
+def infer_node(part: NodePart, obs: NodeObservation, target: StateMode | None,
+               candidates: Sequence[str] | None = None) -> Actual:
+    """A node's actual from what it reported. ``candidates``: ``node_mode_candidates(part,
+    target)``, when the caller keeps them."""
     if not obs.seen:
         return Actual(part.name, State.UNKNOWN, state_inferred=False, reason="never seen")
     if obs.gone:
@@ -45,8 +56,9 @@ def infer_node(part: NodePart, obs: NodeObservation, target: StateMode | None) -
     if obs.state is not State.ACTIVE:
         # A node's mode only means something while it is active.
         return Actual(part.name, obs.state, state_inferred=state_inferred, mode_inferred=False)
-    for name in node_mode_candidates(part, target):
-        if part.modes[name].matches(obs.parameters):
+    modes = part.modes
+    for name in node_mode_candidates(part, target) if candidates is None else candidates:
+        if modes[name].matches(obs.parameters):
             return Actual(part.name, State.ACTIVE, name, state_inferred=state_inferred)
     return Actual(part.name, State.ACTIVE, None, state_inferred=state_inferred,
                   reason=_mode_mismatch(part, obs.parameters))
@@ -66,14 +78,10 @@ def infer_system(part: SystemPart, actual_of: Callable[[str], Actual], target: S
         if actual.state is State.ERRORPROCESSING:
             return Actual(part.name, State.ERRORPROCESSING, reason=f"{actual.part} is in errorprocessing")
 
-    relevant = part.parts
-    if target is not None and target.mode is not None and target.mode in part.modes:
-        mode = part.modes[target.mode]
-        relevant = tuple(e.part for e in mode.entries.values() if not e.dont_care)
+    relevant = relevant_parts(part, target)
     unknown = [a for a in actuals if a.part in relevant and not a.known]
     if unknown:
-        why = "; ".join(f"{a.part}: {a.reason or 'unknown'}" for a in unknown)
-        return Actual(part.name, State.UNKNOWN, reason=f"part state unknown ({why})")
+        return Actual(part.name, State.UNKNOWN, reason=unknown_reason(unknown))
 
     if target is None:
         return _infer_untargeted(part, actual_of, actuals)
@@ -123,6 +131,11 @@ class Inference:
         self._targets: dict[str, StateMode] = {}
         self._actual: dict[str, Actual] = {}
         self._tallies: dict[str, Tally] = {}
+        self._actual_of = self._actual.__getitem__
+        #: Read-only views for the engine's hot paths (a mapping lookup, not a method call).
+        self.targets: Mapping[str, StateMode] = self._targets
+        self.actuals: Mapping[str, Actual] = self._actual
+        self._candidates: dict[tuple[str, str | None], list[str]] = {}  # (node, target mode) -> order
         for name in self._hierarchy.bottom_up:
             part = model.parts[name]
             if isinstance(part, SystemPart):
@@ -171,28 +184,36 @@ class Inference:
     def _recompute(self, part: str) -> Changes:
         """``part``, then the systems above it that see a change, bottom-up."""
         changes: Changes = {}
+        actual, parents, tallies = self._actual, self._hierarchy.parents, self._tallies
         pending = {part}
         for name in (part, *self._hierarchy.ancestors[part]):
             if name not in pending:
                 continue
+            pending.discard(name)
             new = self._compute(name)
-            old = self._actual[name]
+            old = actual[name]
             if new != old:
-                self._actual[name] = new
+                actual[name] = new
                 changes[name] = (old, new)
-                for parent in self._hierarchy.parents[name]:
-                    self._tallies[parent].update(name, old, new)
+                for parent in parents[name]:
+                    tallies[parent].update(name, old, new)
                     pending.add(parent)
+            if not pending:
+                break
         return changes
 
     def _compute(self, name: str) -> Actual:
         target = self._targets.get(name)
         tally = self._tallies.get(name)
         if tally is not None:
-            return tally.infer(target, self._actual.__getitem__)
+            return tally.infer(target, self._actual_of)
         part = self.model.parts[name]
         assert isinstance(part, NodePart)
-        return infer_node(part, self._observations[name], target)
+        key = (name, None if target is None else target.mode)
+        candidates = self._candidates.get(key)
+        if candidates is None:
+            candidates = self._candidates[key] = node_mode_candidates(part, target)
+        return infer_node(part, self._observations[name], target, candidates)
 
 
 def infer_all(model: Model, observations: Mapping[str, NodeObservation],

@@ -29,8 +29,8 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Mapping
+from types import TracebackType
 
 from sm_bt.engine.backend import Backend, CallResult, Done, NodeReport
 from sm_bt.engine.clock import TimerHandle
@@ -61,6 +61,30 @@ _GOAL = {step.transition: step.goal for step in REQUESTABLE}
 _MAX_PASSES = 100_000
 
 
+class _Entry:
+    """``with manager._entry():`` (a class, not a generator: entered on every report)."""
+
+    __slots__ = ("_manager",)
+
+    def __init__(self, manager: ModeManager) -> None:
+        self._manager = manager
+
+    def __enter__(self) -> None:
+        manager = self._manager
+        manager._lock.acquire()
+        manager._depth += 1
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        manager = self._manager
+        try:
+            manager._depth -= 1
+            if kind is None and not manager._depth and not manager._closed:
+                manager._settle_and_notify()
+        finally:
+            manager._lock.release()
+
+
 class ModeManager:
     """Manage the parts of ``model`` through ``backend``.
 
@@ -81,6 +105,7 @@ class ModeManager:
         self.clock = backend.clock
         self.request_timeout = request_timeout
         self._lock = threading.RLock()
+        self._entered = _Entry(self)
         self._hierarchy = Hierarchy.of(model)
         self._inference = Inference(model, self._hierarchy)
         self._divergences = Divergences(model, self._hierarchy, self._inference, grace_period)
@@ -98,7 +123,8 @@ class ModeManager:
         self._reported: set[str] = set()  # divergences already logged as errors
         self._agenda: deque[Callable[[], None]] = deque()
         self._outbox = Outbox()
-        self._subscriptions: list[Subscription] = []
+        # A tuple, replaced on (un)subscribe: notifying iterates it with no copy.
+        self._subscriptions: tuple[Subscription, ...] = ()
         self._depth = 0
         self._grace_timer: TimerHandle | None = None
         self._grace_due: float | None = None
@@ -252,7 +278,7 @@ class ModeManager:
         subscription = Subscription(callback, parts, None if kinds is None else frozenset(kinds),
                                     self._unsubscribe)
         with self._lock:
-            self._subscriptions.append(subscription)
+            self._subscriptions = (*self._subscriptions, subscription)
         return subscription
 
     def close(self) -> None:
@@ -508,28 +534,22 @@ class ModeManager:
 
     # -- plumbing ---------------------------------------------------------------------------------
 
-    @contextmanager
-    def _entry(self) -> Iterator[None]:
+    def _entry(self) -> _Entry:
         """Every entry point: serialise; the outermost one then settles and notifies observers.
         Observers may call back in: those calls only queue their effects, which the outermost
         entry settles before it returns."""
-        with self._lock:
-            self._depth += 1
-            try:
-                yield
-            finally:
-                self._depth -= 1
-            if self._depth or self._closed:
-                return
-            self._depth += 1
-            try:
-                self._settle()
-                while (event := self._outbox.pop()) is not None:
-                    self._notify(event)
-                    if self._agenda or self._divergences.pending:  # an observer called in
-                        self._settle()
-            finally:
-                self._depth -= 1
+        return self._entered
+
+    def _settle_and_notify(self) -> None:
+        self._depth += 1
+        try:
+            self._settle()
+            while (event := self._outbox.pop()) is not None:
+                self._notify(event)
+                if self._agenda or self._divergences.pending:  # an observer called in
+                    self._settle()
+        finally:
+            self._depth -= 1
 
     def _locked(self, read: Callable[[], str]) -> str:
         with self._lock:
@@ -556,14 +576,15 @@ class ModeManager:
         if new is None:
             self._reported.discard(part)
             self._reactions.back_on_target(part, now)
-            self._emit(EventKind.DIVERGENCE, part, target=self._inference.target(part))
+            self._outbox.put(Event(EventKind.DIVERGENCE, part, now, "", self._inference.actual(part),
+                                   self._inference.target(part)))
             return
         if new.is_error and part not in self._reported:  # once per divergence, not per attempt
             self._reported.add(part)
             why = f": {new.reason}" if new.reason else ""
             log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s%s).",
                         part, new.target, new.actual, new.cause.value, why)
-        self._emit(EventKind.DIVERGENCE, part, divergence=new)
+        self._outbox.put(Event(EventKind.DIVERGENCE, part, now, "", new.actual, None, new))
 
     def _schedule_grace(self) -> None:
         """One timer, for the earliest grace period still running (a timer that fires for a grace
@@ -583,8 +604,8 @@ class ModeManager:
             self._divergences.grace_over(self.clock.now())
 
     def _notify(self, event: Event) -> None:
-        for subscription in list(self._subscriptions):
-            if subscription.wants(event):
+        for subscription in self._subscriptions:
+            if subscription.everything or subscription.wants(event):
                 try:
                     subscription.callback(event)
                 except Exception:  # an observer's bug must not break the manager
@@ -594,22 +615,25 @@ class ModeManager:
               divergence: Divergence | None = None, request: Request | None = None,
               previous: Actual | None = None, transition: Transition | None = None) -> None:
         actual = self._inference.actual(part) if part in self.model.parts else None
-        self._outbox.put(Event(kind, part, self.clock.now(), text, actual=actual, target=target,
-                               divergence=divergence, request=request, previous=previous, transition=transition))
+        self._outbox.put(Event(kind, part, self.clock.now(), text, actual, target, divergence, request, previous,
+                               transition))
 
     def _apply(self, changes: Changes) -> None:
+        now = self.clock.now()
+        outbox, touch, watchers, confirming = (self._outbox, self._divergences.touch, self._watchers,
+                                               self._confirming)
         for part, (old, new) in changes.items():
-            self._outbox.actual(Event(EventKind.ACTUAL, part, self.clock.now(), actual=new, previous=old))
-            self._divergences.touch(part)
-            for watcher in self._watchers.get(part, ()):
-                self._divergences.touch(watcher)
-            for execution in list(self._confirming.get(part, ())):
-                self.confirm(execution)
+            outbox.actual(Event(EventKind.ACTUAL, part, now, "", new, None, None, None, old))
+            touch(part)
+            for watcher in watchers.get(part, ()):
+                touch(watcher)
+            if part in confirming:
+                for execution in list(confirming[part]):
+                    self.confirm(execution)
 
     def _unsubscribe(self, subscription: Subscription) -> None:
         with self._lock:
-            if subscription in self._subscriptions:
-                self._subscriptions.remove(subscription)
+            self._subscriptions = tuple(s for s in self._subscriptions if s is not subscription)
 
     def _check_part(self, part: str) -> None:
         if part not in self.model.parts:

@@ -11,8 +11,7 @@ O(1).
 
 from __future__ import annotations
 
-from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Container, Iterable
 
 from sm_bt.engine.actual import Actual
 from sm_bt.model.states import State, StateMode
@@ -23,7 +22,41 @@ MOVING_TO = {
     State.UNCONFIGURED: State.CLEANINGUP,
     State.FINALIZED: State.SHUTTINGDOWN,
 }
+_REASONS_KEPT = 32  # per system
 _GOING_DOWN = (State.ACTIVE, State.ACTIVATING, State.DEACTIVATING)
+
+
+#: How many unknown parts a system's reason names (the others are counted), so that it stays short
+#: however big the system; a sub-system is named by its reason's headline, not its parts'.
+UNKNOWN_NAMED = 3
+UNKNOWN_PARTS = "part state unknown"
+UNKNOWN_UNTARGETED = "parts match no mode and no target is set"
+
+
+def unknown_reason(unknown: Iterable[Actual]) -> str:
+    """A system's reason for being unknown: ``unknown`` are its unknown parts that matter, in
+    the order of its parts."""
+    shown: list[str] = []
+    more = 0
+    for actual in unknown:
+        if len(shown) == UNKNOWN_NAMED:
+            more += 1
+            continue
+        why = actual.reason or "unknown"
+        for headline in (UNKNOWN_PARTS, UNKNOWN_UNTARGETED):
+            if why.startswith(headline):
+                why = headline
+        shown.append(f"{actual.part}: {why}")
+    if more:
+        shown.append(f"{more} more")
+    return f"{UNKNOWN_PARTS} ({'; '.join(shown)})"
+
+
+def relevant_parts(system: SystemPart, target: StateMode | None) -> Container[str]:
+    """The parts whose state a system's inference needs: for a target mode, those it names."""
+    if target is not None and target.mode is not None and target.mode in system.modes:
+        return {e.part for e in system.modes[target.mode].entries.values() if not e.dont_care}
+    return system.parts
 
 
 def entry_matches(entry_target: StateMode | None, actual: Actual) -> bool:
@@ -53,13 +86,13 @@ def untargeted_mismatch(part: SystemPart, actual_of: Callable[[str], Actual], st
     shown = ", ".join(f"{a.part} {a}" for a in map(actual_of, part.parts))
     if states == {State.ACTIVE}:
         return Actual(part.name, State.ACTIVE, reason=f"parts match no mode ({shown})")
-    return Actual(part.name, State.UNKNOWN, reason=f"parts match no mode and no target is set ({shown})")
+    return Actual(part.name, State.UNKNOWN, reason=f"{UNKNOWN_UNTARGETED} ({shown})")
 
 
 class Tally:
     """The counts of one system; :meth:`update` them on each change of a part, then :meth:`infer`."""
 
-    __slots__ = ("_by_part", "_mismatch", "_modes_sorted", "_size", "_states", "_unknown", "system")
+    __slots__ = ("_by_part", "_mismatch", "_modes_sorted", "_reasons", "_size", "_states", "_unknown", "system")
 
     def __init__(self, system: SystemPart, actual_of: Callable[[str], Actual]) -> None:
         self.system = system
@@ -74,8 +107,12 @@ class Tally:
                     self._by_part.setdefault(entry.part, []).append((name, entry.target, place))
         # mode -> {place of an entry its part does not meet: that part}
         self._mismatch: dict[str, dict[int, str]] = {name: {} for name in system.modes}
-        self._states: Counter[State] = Counter()
+        # A plain dict with every state: Counter's lookup of a missing key runs Python code.
+        self._states: dict[State, int] = dict.fromkeys(State, 0)
         self._unknown: set[str] = set()
+        # (wanted mode, first part it lacks, that part's actual) -> the reason: a part flapping
+        # between two values makes the same two strings again and again.
+        self._reasons: dict[tuple[str, str, Actual], str] = {}
         for part in system.parts:
             self._add(part, actual_of(part))
 
@@ -106,13 +143,10 @@ class Tally:
             failing = next(p for p in system.parts if actual_of(p).state is State.ERRORPROCESSING)
             return Actual(system.name, State.ERRORPROCESSING, reason=f"{failing} is in errorprocessing")
         if self._unknown:
-            relevant = system.parts
-            if target is not None and target.mode is not None and target.mode in system.modes:
-                relevant = tuple(e.part for e in system.modes[target.mode].entries.values() if not e.dont_care)
-            unknown = [actual_of(p) for p in relevant if p in self._unknown]
+            relevant = relevant_parts(system, target)
+            unknown = [p for p in system.parts if p in self._unknown and p in relevant]
             if unknown:
-                why = "; ".join(f"{a.part}: {a.reason or 'unknown'}" for a in unknown)
-                return Actual(system.name, State.UNKNOWN, reason=f"part state unknown ({why})")
+                return Actual(system.name, State.UNKNOWN, reason=unknown_reason(map(actual_of, unknown)))
         if target is None:
             return self._untargeted(actual_of)
         if target.state is State.ACTIVE:
@@ -121,8 +155,7 @@ class Tally:
             if not missing:
                 return Actual(system.name, State.ACTIVE, wanted)
             first = missing[min(missing)]
-            entry = system.modes[wanted].entries[first]
-            reason = f"{first} is {actual_of(first)}, {wanted} wants {entry.target}"
+            reason = self._reason(wanted, first, actual_of(first))
             for name in self._modes_sorted:
                 if name != wanted and not self._mismatch[name]:
                     return Actual(system.name, State.ACTIVATING, name, reason=reason)
@@ -135,6 +168,16 @@ class Tally:
             moving = State.DEACTIVATING if going_down else State.CONFIGURING
         lagging = next(a for a in map(actual_of, system.parts) if a.state is not target.state)
         return Actual(system.name, moving, reason=f"{lagging.part} is {lagging.state.label}")
+
+    def _reason(self, wanted: str, first: str, actual: Actual) -> str:
+        key = (wanted, first, actual)
+        reason = self._reasons.get(key)
+        if reason is None:
+            if len(self._reasons) >= _REASONS_KEPT:
+                self._reasons.clear()
+            entry = self.system.modes[wanted].entries[first]
+            reason = self._reasons[key] = f"{first} is {actual}, {wanted} wants {entry.target}"
+        return reason
 
     def _untargeted(self, actual_of: Callable[[str], Actual]) -> Actual:
         system = self.system
