@@ -32,6 +32,10 @@ class Clock(Protocol):
         """Run ``callback`` once, ``delay`` seconds from now (never synchronously inside this call)."""
 
 
+def _nothing() -> None:
+    pass
+
+
 class _Timer:
     __slots__ = ("callback", "cancelled", "due")
 
@@ -42,6 +46,13 @@ class _Timer:
 
     def cancel(self) -> None:
         self.cancelled = True
+        self.callback = _nothing  # keeps nothing alive while it waits in the queue to be dropped
+
+    def fire(self) -> None:
+        # Forget the callback first: callbacks often hold their own handle (to forget it when they
+        # run), and the cycle would otherwise live until a full garbage collection.
+        callback, self.callback = self.callback, _nothing
+        callback()
 
 
 class VirtualClock:
@@ -73,7 +84,7 @@ class VirtualClock:
             if timer.cancelled:
                 continue
             self._now = max(self._now, due)
-            timer.callback()
+            timer.fire()
         self._now = max(self._now, when)
 
     def run_pending(self) -> None:
@@ -140,7 +151,9 @@ class WallClock:
                 if self._closed:
                     return
                 _, _, timer = heapq.heappop(self._queue)
+            callback = timer.callback
             try:
-                timer.callback()
+                timer.fire()
             except Exception:  # one bad callback must not stop every later timer
-                log.exception("timer callback %r failed", timer.callback)
+                log.exception("timer callback %r failed", callback)
+            callback = _nothing  # not kept alive while this thread waits for the next timer
