@@ -294,3 +294,21 @@ def test_a_request_that_needs_a_finalized_node_is_refused_and_changes_nothing() 
     assert not [e for e in rig.backend.events if e.kind == "request"], "no node was touched"
     # A mode that does not need amcl is fine.
     assert rig.finish(rig.manager.change_mode("controller_server", "FAST")).succeeded
+
+
+def test_a_divergence_a_request_works_on_is_announced_when_it_starts_and_ends_not_per_report() -> None:
+    """While a request drives pilot's four nodes, each report moves pilot's actual (and the
+    divergence's reason): that shows in ACTUAL events; the divergence itself is announced when it
+    starts (in flight) and when it ends, not once per node report (at 10,000 nodes that was an
+    event per node for every system on the way)."""
+    rig = Rig(bundled("pilot"), rules=False, recovery=False, transition_delay=0.05)
+    request = rig.finish(rig.manager.change_state("pilot", "configure"))
+    assert request.succeeded, request.reason
+    divergences = rig.kinds(EventKind.DIVERGENCE, "pilot")
+    assert [(e.divergence.cause if e.divergence else None) for e in divergences] == [Cause.IN_FLIGHT, None]
+    assert len(rig.kinds(EventKind.ACTUAL, "pilot")) > 2  # configuring ..., then inactive
+    # The record stays current for whoever asks while it lasts.
+    rig.manager.change_mode("pilot", "f_normal_mode")
+    rig.run(0.02)
+    record = rig.manager.divergence("pilot")
+    assert record is not None and record.actual == rig.manager.actual("pilot")

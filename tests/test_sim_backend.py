@@ -113,6 +113,21 @@ def test_configure_follows_the_virtual_clock() -> None:
     assert [e.time for e in backend.node("amcl").transitions] == [0.0, pytest.approx(0.05)]
 
 
+def test_without_history_nothing_is_recorded_and_the_nodes_work_the_same() -> None:
+    backend, recorder = attached(history=False)
+    results: list[CallResult] = []
+    backend.change_state("amcl", T.CONFIGURE, results.append)
+    backend.set_parameters("amcl", {"alpha1": 0.5}, results.append)
+    backend.clock.advance(1.0)
+    assert results == [CallResult(True), CallResult(True)]
+    assert recorder.states("amcl") == [S.CONFIGURING, S.INACTIVE]
+    assert backend.events == []
+    with_history, _ = attached()
+    with_history.change_state("amcl", T.CONFIGURE, results.append)
+    with_history.clock.advance(1.0)
+    assert transition_ids(with_history, "amcl") == [1, 10]
+
+
 # The backend wires OUTCOMES correctly: SimNode's hand-written truth table pins the table itself.
 @pytest.mark.parametrize(("step", "outcome"), [(s, o) for s in REQUESTABLE for o in Outcome])
 def test_every_transition_and_outcome_through_the_backend(step: Any, outcome: Outcome) -> None:

@@ -8,7 +8,8 @@ from typing import NamedTuple
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import ParamValue
 
-_LABELS = {state: state.label for state in State}  # State.label lowers the name on every call
+#: ``state.label`` without the call (``State.label`` lowers the name each time).
+STATE_LABELS = {state: state.label for state in State}
 
 
 class Actual(NamedTuple):
@@ -44,7 +45,7 @@ class Actual(NamedTuple):
     def __str__(self) -> str:
         if self.state is State.ACTIVE and self.mode:
             return f"active.{self.mode}"
-        return _LABELS[self.state]
+        return STATE_LABELS[self.state]
 
 
 @dataclass

@@ -158,8 +158,10 @@ class Divergences:
                     changes.append(Change(part, old, None))
                 continue
             self.records[part] = new
-            if old is None or old.cause is not new.cause or old.actual != new.actual or old.reason != new.reason \
-                    or old.target != new.target:
+            # While a request works on it, a divergence's actual and reason move with every node
+            # report: those show in ACTUAL events (and in the record), not as changes.
+            if old is None or old.cause is not new.cause or old.target != new.target or (
+                    new.cause is not Cause.IN_FLIGHT and (old.actual != new.actual or old.reason != new.reason)):
                 changes.append(Change(part, old, new))
             if new.cause is Cause.FAULT:
                 faults.append(new)

@@ -50,7 +50,8 @@ class Divergence(NamedTuple):
 class EventKind(str, enum.Enum):
     ACTUAL = "actual"  # inferred actual state/mode changed
     TARGET = "target"  # target changed
-    DIVERGENCE = "divergence"  # divergence started, changed cause, or ended (divergence None)
+    DIVERGENCE = "divergence"  # started, ended (divergence None), or changed: cause or target; actual
+    # or reason only while no request works on it (then they move with every node report)
     REQUEST = "request"  # a request started or finished
     RULE = "rule"  # a rule fired
     FAILED = "failed"  # recovery gave up on a part

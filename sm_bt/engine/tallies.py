@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Container, Iterable
 
-from sm_bt.engine.actual import Actual
+from sm_bt.engine.actual import STATE_LABELS, Actual
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import SystemPart
 
@@ -167,7 +167,7 @@ class Tally:
             going_down = any(self._states[state] for state in _GOING_DOWN)
             moving = State.DEACTIVATING if going_down else State.CONFIGURING
         lagging = next(a for a in map(actual_of, system.parts) if a.state is not target.state)
-        return Actual(system.name, moving, reason=f"{lagging.part} is {lagging.state.label}")
+        return Actual(system.name, moving, reason=f"{lagging.part} is {STATE_LABELS[lagging.state]}")
 
     def _reason(self, wanted: str, first: str, actual: Actual) -> str:
         key = (wanted, first, actual)

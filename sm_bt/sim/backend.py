@@ -108,7 +108,8 @@ class SimBackend:
     unconfigured; a :class:`State` or its label, ``"active"``) with their default mode's parameter
     values, overridden per node by ``initial_parameters``. Nodes named in ``late`` are not running
     until that virtual time. Nodes named in ``plain`` have no lifecycle (see the module docstring):
-    they always run ``active``, whatever one ``initial_state`` for all says.
+    they always run ``active``, whatever one ``initial_state`` for all says. With ``history=False``
+    nothing is kept in :attr:`events` (benchmarks: at 10,000 nodes a bring-up records 80,000).
     """
 
     def __init__(
@@ -125,6 +126,7 @@ class SimBackend:
         late: Mapping[str, float] | None = None,
         plain: Collection[str] = (),
         report_delay: float = 0.0,
+        history: bool = True,
     ) -> None:
         for label, value in (("transition_delay", transition_delay), ("error_delay", error_delay),
                              ("parameter_delay", parameter_delay), ("vanish_after", vanish_after),
@@ -138,6 +140,7 @@ class SimBackend:
         self.report_delay = report_delay
         #: Everything that happened, oldest first.
         self.events: list[SimEvent] = []
+        self._history = history
 
         names = tuple(part.name for part in model.nodes)
         self._declared = {part.name: part.modes[part.default_mode].values() for part in model.nodes}
@@ -541,7 +544,8 @@ class SimBackend:
 
     def _record(self, node: str, kind: EventKind, details: str, *, transition: TransitionEvent | None = None,
                 parameters: Mapping[str, ParamValue] | None = None) -> None:
-        self.events.append(SimEvent(self._clock.now(), node, kind, details, transition, parameters))
+        if self._history:
+            self.events.append(SimEvent(self._clock.now(), node, kind, details, transition, parameters))
 
     def _after(self, node: str, delay: float, action: Callable[[], None]) -> None:
         """Schedule ``action`` on behalf of ``node``'s process, so that a crash or restart cancels it."""
