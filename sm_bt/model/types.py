@@ -83,6 +83,9 @@ def _is_number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+_MISSING = object()
+
+
 def exact_match(expected: ParamValue, actual: ParamValue) -> bool:
     """Same type and equal value; ``bool`` is never equal to ``int``; arrays compare element-wise."""
     if type(expected) is not type(actual):
@@ -110,6 +113,15 @@ class NodeMode:
     name: str
     parameters: Mapping[str, ParamSpec]
     location: Location
+    # Inference checks modes on every parameter report: the exact parameters as (name, value,
+    # type) and the others' specs, sorted out once.
+    _exact: tuple[tuple[str, ParamValue, type], ...] = field(init=False, repr=False, compare=False)
+    _inexact: tuple[ParamSpec, ...] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        specs = self.parameters.values()
+        object.__setattr__(self, "_exact", tuple((s.name, s.value, type(s.value)) for s in specs if s.match == EXACT))
+        object.__setattr__(self, "_inexact", tuple(s for s in specs if s.match != EXACT))
 
     def values(self) -> dict[str, ParamValue]:
         """The full parameter set to send (atomically) when switching a node to this mode."""
@@ -117,10 +129,12 @@ class NodeMode:
 
     def matches(self, observed: Mapping[str, ParamValue]) -> bool:
         """True when every parameter of the mode is observed with a matching value."""
-        for name, spec in self.parameters.items():
-            if name not in observed or not spec.matches(observed[name]):
+        missing = _MISSING
+        for name, value, kind in self._exact:  # exact_match, inlined
+            seen = observed.get(name, missing)
+            if type(seen) is not kind or seen != value:
                 return False
-        return True
+        return all(spec.name in observed and spec.matches(observed[spec.name]) for spec in self._inexact)
 
 
 @dataclass(frozen=True)
