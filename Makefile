@@ -49,13 +49,14 @@ stress: $(STAMP)
 TYPECHECK := build/typecheck
 
 lint: $(STAMP)
-	$(BIN)/ruff check sm_bt behaviours trees models tests
+	$(BIN)/ruff check sm_bt behaviours trees models tests bench
 	rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/sm_bt
 	for f in sm_bt/*; do ln -s "$(CURDIR)/$$f" $(TYPECHECK)/sm_bt/; done
 	ln -s "$(CURDIR)/behaviours" $(TYPECHECK)/sm_bt/behaviours
 	ln -s "$(CURDIR)/trees" $(TYPECHECK)/sm_bt/trees
 	ln -s "$(CURDIR)/models" $(TYPECHECK)/sm_bt/models
-	cd $(TYPECHECK) && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml -p sm_bt
+	ln -s "$(CURDIR)/bench" $(TYPECHECK)/bench
+	cd $(TYPECHECK) && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml -p sm_bt -p bench
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -14,6 +14,7 @@ sm_bt configures logging: as a library it stays silent unless the application do
 from __future__ import annotations
 
 import argparse
+import gc
 import logging
 import signal
 import sys
@@ -107,6 +108,9 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
             "recovery": not args.no_recovery})
     except (RosUnavailable, ImportError) as error:
         raise RosMissing(str(error)) from None
+    # The model and the manager's tables live as long as the process: keep them out of the garbage
+    # collector's full passes (at 10,000 nodes each pass walked ~700,000 objects, ~0.5 s).
+    gc.freeze()
     try:
         _align_node_logger(runtime.node, args.log_level)
         for line in startup_lines(model):

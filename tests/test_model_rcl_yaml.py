@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from textwrap import dedent
 
 import pytest
@@ -229,3 +231,36 @@ def test_top_level_must_be_a_map() -> None:
     (issue,) = errors_of("- a\n- b\n")
     assert issue.location.line == 1
     assert "map of part names" in issue.message
+
+
+@pytest.mark.parametrize("char", ["\x00", "\x07", "\x1b"])
+def test_a_control_character_is_an_error_at_its_line(char: str) -> None:
+    (issue,) = errors_of(node_text("a: 1", f"b: x{char}y"))
+    assert issue.location.line == 8
+    assert "not allowed in YAML" in issue.message
+
+
+@pytest.mark.parametrize("opening", ["[", "{a: ", "- "])
+def test_nesting_deeper_than_any_model_is_refused_without_exhausting_the_stack(opening: str) -> None:
+    """Checked in a child process: a crash of the parser (stack overflow) must fail the test, not
+    pytest. 100,000 levels (1,500 in block style): the composer recursed (RecursionError at ~330),
+    a C one would overflow."""
+    if opening == "- ":  # block style: indentation grows with depth, so fewer levels
+        text = "x:\n" + "".join(f"{'  ' * i}- \n" for i in range(1, 1500))
+    else:
+        text = "x: " + opening * 100_000 + "\n"
+    script = ("import sys\nfrom sm_bt.model import ModelError, load_model_text\n"
+              "try:\n    load_model_text(sys.stdin.read(), 'deep.yaml')\n"
+              "except ModelError as error:\n    print(error)\n")
+    done = subprocess.run([sys.executable, "-c", script], input=text, capture_output=True, text=True, timeout=120,
+                          check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "error: the file nests more than 100 levels deep" in done.stdout, done.stdout[:500]
+    assert "Traceback" not in done.stderr
+
+
+def test_a_model_may_nest_as_deep_as_the_limit_allows() -> None:
+    # A parameter nested 90 maps deep (a namespaced name, "deep.a.a...a") still loads: the limit
+    # is far from anything a model needs.
+    model = load_model_text(NODE + "          deep: " + "{a: " * 90 + "1" + "}" * 90 + "\n")
+    assert model.parts["n"].modes["__DEFAULT__"].values()["deep" + ".a" * 90] == 1  # type: ignore[union-attr]

@@ -16,9 +16,11 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import yaml
+from yaml._yaml import CParser
+from yaml._yaml import Mark as CMark
 
 from sm_bt.model.diagnostics import Diagnostics
 from sm_bt.model.types import ParamValue
@@ -175,149 +177,223 @@ def describe(node: YNode) -> str:
     return repr(node.text)
 
 
-class _AliasNode(yaml.ScalarNode):
-    """Stands in for an alias (already reported) so that composing can go on."""
+#: Deeper than any model needs (a model is about six levels deep); deeper input is refused with
+#: a clear error instead of being built.
+MAX_DEPTH = 100
 
 
-class _Composer(yaml.SafeLoader):
-    """Composes nodes only, noting what rcl refuses (anchors, aliases) and explicit ``!!str``."""
+class _Skipped:
+    """A node that is not kept (refused alias, empty value, misplaced list or map), already
+    reported or to be reported by whoever holds it."""
 
-    def __init__(self, text: str) -> None:
-        super().__init__(text)
-        self.refused: list[tuple[int, str]] = []
-        self.explicit_strings: set[int] = set()
 
-    def compose_node(self, parent: yaml.Node | None, index: int) -> yaml.Node | None:
-        event = self.peek_event()  # type: ignore[no-untyped-call]
-        line = event.start_mark.line + 1 if event.start_mark else 0
-        if isinstance(event, yaml.AliasEvent):
-            self.get_event()  # type: ignore[no-untyped-call]
-            self.refused.append((line, f"alias '*{event.anchor}': ROS 2 parameter files do not support "
-                                       "aliases: write the value out in full"))
-            return _AliasNode(_STR_TAG, "")
-        if isinstance(event, yaml.NodeEvent) and event.anchor is not None:
-            self.refused.append((line, f"anchor '&{event.anchor}': ROS 2 parameter files do not support "
-                                       "anchors or aliases: remove it and write values out in full"))
-            self.anchors.pop(event.anchor, None)  # a repeated anchor is reported here, not as a crash
-        node = super().compose_node(parent, index)
-        if isinstance(event, yaml.ScalarEvent) and event.tag == _STR_TAG:
-            self.explicit_strings.add(id(node))
-        return node
+_SKIPPED = _Skipped()
+
+
+@dataclass
+class _Collection:
+    """A sequence or mapping being built from the parser's events."""
+
+    line: int
+    is_map: bool
+    kept: bool  # False: composed only for its anchors and aliases, nothing in it is converted
+    items: list[YScalar] = field(default_factory=list)
+    entries: list[tuple[YScalar, YNode]] = field(default_factory=list)
+    first_line: dict[str, int] = field(default_factory=dict)
+    key: YScalar | _Skipped | None = None  # a mapping's key awaiting its value (_SKIPPED: drop it)
+    count: int = 0  # children seen (an alias counts: "[*a]" is not an empty list)
 
 
 def parse_document(text: str, diag: Diagnostics) -> YMap | None:
-    """Compose ``text`` into a typed tree; ``None`` (with errors) when there is nothing usable."""
-    composer = _Composer(text)
+    """Build ``text`` into a typed tree; ``None`` (with errors) when there is nothing usable.
+
+    libyaml's parser (the one ``CSafeLoader`` uses) gives the events with their marks; the tree is
+    built from them here, without recursion, so that no input can exhaust the stack.
+    """
+    # What the builder finds is kept only if the whole text parses: after a syntax error, the
+    # events before it often show the error's symptoms (an empty value), not a second problem.
+    found = Diagnostics(diag.file)
     try:
-        root = composer.get_single_node()
+        root = _Builder(text, found).build()
+    except _TooDeep as too_deep:
+        diag.error(too_deep.line, f"the file nests more than {MAX_DEPTH} levels deep: a model needs a few "
+                                  "(part, ros__parameters, modes, mode, parameter); check the brackets and "
+                                  "indentation at this line")
+        return None
+    except _SecondDocument as second:
+        diag.error(second.line, "YAML syntax error: expected a single document in the stream but found another "
+                                "document: a model file holds one YAML document: remove the second '---' and what "
+                                "follows, or merge the documents")
+        return None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        line = mark.line + 1 if mark else 0
         what = " ".join(part for part in (exc.context, exc.problem) if part)
-        fix = ("a model file holds one YAML document: remove the second '---' and what follows, or merge "
-               "the documents") if "single document" in what else "fix the YAML syntax at this line"
-        diag.error(line, f"YAML syntax error: {what}: {fix}")
+        diag.error(mark.line + 1 if mark else 1, f"YAML syntax error: {what}: fix the YAML syntax at this line")
+        return None
+    except yaml.reader.ReaderError as exc:
+        line = text.count("\n", 0, exc.position) + 1
+        diag.error(line, f"character {exc.character!r} is not allowed in YAML (control characters and invalid "
+                         "code points): remove it")
         return None
     except yaml.YAMLError as exc:
-        diag.error(0, f"YAML error: {exc}: fix the YAML syntax")
+        diag.error(1, f"YAML error: {str(exc).splitlines()[0]}: fix the YAML syntax")
         return None
-    finally:
-        composer.dispose()
-    for line, message in composer.refused:
-        diag.error(line, message)
+    diag.errors.extend(found.errors)
+    if root is _SKIPPED and diag.errors:
+        return None
     if root is None:
         diag.error(1, "the file holds no model: write at least one part with 'ros__parameters'")
         return None
-    tree = _Converter(text, composer.explicit_strings, diag).convert(root)
-    if not isinstance(tree, YMap):
-        diag.error(_line(root), "a model file must be a map of part names at the top level")
+    if not isinstance(root, YMap):
+        diag.error(root.line if isinstance(root, (YScalar, YSeq)) else 1,
+                   "a model file must be a map of part names at the top level")
         return None
-    return tree
+    return root
 
 
-def _line(node: yaml.Node) -> int:
-    return node.start_mark.line + 1 if node.start_mark else 0
+class _TooDeep(Exception):
+    def __init__(self, line: int) -> None:
+        self.line = line
 
 
-class _Converter:
-    def __init__(self, source: str, explicit_strings: set[int], diag: Diagnostics) -> None:
+class _SecondDocument(Exception):
+    def __init__(self, line: int) -> None:
+        self.line = line
+
+
+def _line_of(mark: yaml.Mark | CMark | None) -> int:
+    return mark.line + 1 if mark is not None else 1
+
+
+class _Builder:
+    """Turns libyaml's events into YScalar/YSeq/YMap, reporting what rcl refuses."""
+
+    def __init__(self, source: str, diag: Diagnostics) -> None:
         self.source = source
-        self.explicit_strings = explicit_strings
         self.diag = diag
+        self.stack: list[_Collection] = []
+        self.root: YNode | _Skipped | None = None
+        self.documents = 0
 
-    def convert(self, node: yaml.Node) -> YNode | None:
-        """The typed node, or ``None`` for an empty value or a refused alias (both reported)."""
-        if isinstance(node, _AliasNode):
-            return None
-        if isinstance(node, yaml.ScalarNode):
-            return self.scalar(node)
-        if isinstance(node, yaml.SequenceNode):
-            return self.sequence(node)
-        if isinstance(node, yaml.MappingNode):
-            return self.mapping(node)
-        self.diag.error(_line(node), "unsupported YAML node: write a map, a list or a value")
-        return None
+    def build(self) -> YNode | _Skipped | None:
+        parser = CParser(self.source)
+        try:
+            while (event := parser.get_event()) is not None:
+                self.event(event)
+        finally:
+            parser.dispose()
+        return self.root
 
-    def scalar(self, node: yaml.ScalarNode) -> YScalar | None:
-        text = str(node.value)
-        quoted = node.style in ("'", '"') or id(node) in self.explicit_strings
+    def event(self, event: yaml.Event) -> None:
+        line = _line_of(event.start_mark)
+        if isinstance(event, yaml.ScalarEvent):
+            self.anchor(event, line)
+            self.add(self.scalar(event, line) if self.kept() else _SKIPPED, line, is_scalar=True)
+        elif isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            self.anchor(event, line)
+            if len(self.stack) >= MAX_DEPTH:
+                raise _TooDeep(line)
+            is_map = isinstance(event, yaml.MappingStartEvent)
+            self.stack.append(_Collection(line, is_map, self.kept() and self.accepts_collection(is_map, line)))
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            done = self.stack.pop()
+            self.add(self.finish(done) if done.kept else _SKIPPED, done.line, is_scalar=False)
+        elif isinstance(event, yaml.AliasEvent):
+            self.diag.error(line, f"alias '*{event.anchor}': ROS 2 parameter files do not support aliases: "
+                                  "write the value out in full")
+            self.add(_SKIPPED, line, is_scalar=False)
+        elif isinstance(event, yaml.DocumentStartEvent):
+            self.documents += 1
+            if self.documents > 1:
+                raise _SecondDocument(line)
+
+    def kept(self) -> bool:
+        """Is the node starting now converted (not inside a dropped node or a refused key)?"""
+        if not self.stack:
+            return True
+        top = self.stack[-1]
+        return top.kept and not (top.is_map and top.key is _SKIPPED)
+
+    def anchor(self, event: yaml.NodeEvent, line: int) -> None:
+        if event.anchor is not None:
+            self.diag.error(line, f"anchor '&{event.anchor}': ROS 2 parameter files do not support anchors or "
+                                  "aliases: remove it and write values out in full")
+
+    def accepts_collection(self, is_map: bool, line: int) -> bool:
+        """A list or map may not be an item of a list, nor a key (both reported here)."""
+        if not self.stack:
+            return True
+        top = self.stack[-1]
+        if top.is_map and top.key is None:
+            self.diag.error(line, "a key must be a plain name, not a list or map")
+            return False
+        if not top.is_map:
+            kind = "maps" if is_map else "lists"
+            self.diag.error(line, f"a list cannot hold {kind} in a ROS 2 parameter file: write a flat list "
+                                  "of values")
+            return False
+        return True
+
+    def scalar(self, event: yaml.ScalarEvent, line: int) -> YScalar | _Skipped:
+        text = event.value
+        quoted = event.style in ("'", '"') or event.tag == _STR_TAG
+        top = self.stack[-1] if self.stack else None
+        if top is not None and top.is_map and top.key is None:  # a key: its text, untyped
+            if not text:
+                self.diag.error(line, f"No key at line {line}: write a name before ':'")
+                return _SKIPPED
+            return YScalar(text, text, line)
         if not text and not quoted:
-            self.diag.error(_line(node), f"No value at line {_line(node)}: write a value, or \"\" for an "
-                                         "empty string")
-            return None
-        return YScalar(text, rcl_scalar(text, quoted=quoted), _line(node), self._word_lines(node))
+            self.diag.error(line, f"No value at line {line}: write a value, or \"\" for an empty string")
+            return _SKIPPED
+        return YScalar(text, rcl_scalar(text, quoted=quoted), line, self._word_lines(event))
 
-    def _word_lines(self, node: yaml.ScalarNode) -> tuple[int, ...]:
-        start, end = node.start_mark, node.end_mark
-        if node.style is not None or not start or not end or start.line == end.line:
+    def _word_lines(self, event: yaml.ScalarEvent) -> tuple[int, ...]:
+        start, end = event.start_mark, event.end_mark
+        if event.style or start is None or end is None or start.line == end.line:  # plain: style ""
             return ()
         segment = self.source[start.index:end.index]
         return tuple(start.line + 1 + segment.count("\n", 0, word.start()) for word in re.finditer(r"\S+", segment))
 
-    def sequence(self, node: yaml.SequenceNode) -> YSeq | None:
-        items: list[YScalar] = []
-        for child in node.value:
-            if isinstance(child, _AliasNode):
-                continue
-            if not isinstance(child, yaml.ScalarNode):
-                kind = "lists" if isinstance(child, yaml.SequenceNode) else "maps"
-                self.diag.error(_line(child), f"a list cannot hold {kind} in a ROS 2 parameter file: "
-                                              "write a flat list of values")
-                continue
-            item = self.scalar(child)
-            if item is None:
-                continue
-            if items and type(item.value) is not type(items[0].value):
-                self.diag.error(item.line, _mixed_message(items[0], item))
-                continue
-            items.append(item)
-        if not node.value:
-            self.diag.error(_line(node), "an empty list has no type in a ROS 2 parameter file: give it "
-                                         "at least one value")
-            return None
-        return YSeq(tuple(items), _line(node))
+    def add(self, node: YNode | _Skipped, line: int, *, is_scalar: bool) -> None:
+        """Put a finished node where it belongs: the root, a list's items, a map's key or value."""
+        if not self.stack:
+            self.root = node
+            return
+        top = self.stack[-1]
+        top.count += 1
+        if not top.is_map:
+            if isinstance(node, YScalar):
+                if top.items and type(node.value) is not type(top.items[0].value):
+                    self.diag.error(node.line, _mixed_message(top.items[0], node))
+                else:
+                    top.items.append(node)
+            return
+        if top.key is None:  # this node is a key
+            top.key = self._key(top, node) if is_scalar else _SKIPPED
+            return
+        key, top.key = top.key, None
+        if isinstance(key, YScalar) and not isinstance(node, _Skipped):
+            top.entries.append((key, node))
 
-    def mapping(self, node: yaml.MappingNode) -> YMap:
-        entries: list[tuple[YScalar, YNode]] = []
-        first_line: dict[str, int] = {}
-        for key_node, value_node in node.value:
-            if not isinstance(key_node, yaml.ScalarNode) or isinstance(key_node, _AliasNode):
-                if not isinstance(key_node, _AliasNode):
-                    self.diag.error(_line(key_node), "a key must be a plain name, not a list or map")
-                continue
-            key_text = str(key_node.value)
-            if not key_text:
-                self.diag.error(_line(key_node), f"No key at line {_line(key_node)}: write a name before ':'")
-                continue
-            if key_text in first_line:
-                self.diag.error(_line(key_node), f"duplicate key {key_text!r} (first at line "
-                                                 f"{first_line[key_text]}): remove or rename one of them")
-                continue
-            first_line[key_text] = _line(key_node)
-            value = self.convert(value_node)
-            if value is not None:
-                entries.append((YScalar(key_text, key_text, _line(key_node)), value))
-        return YMap(tuple(entries), _line(node))
+    def _key(self, mapping: _Collection, node: YNode | _Skipped) -> YScalar | _Skipped:
+        if not isinstance(node, YScalar) or not mapping.kept:
+            return _SKIPPED
+        if node.text in mapping.first_line:
+            self.diag.error(node.line, f"duplicate key {node.text!r} (first at line "
+                                       f"{mapping.first_line[node.text]}): remove or rename one of them")
+            return _SKIPPED
+        mapping.first_line[node.text] = node.line
+        return node
+
+    def finish(self, done: _Collection) -> YNode | _Skipped:
+        if done.is_map:
+            return YMap(tuple(done.entries), done.line)
+        if not done.count:
+            self.diag.error(done.line, "an empty list has no type in a ROS 2 parameter file: give it at least "
+                                       "one value")
+            return _SKIPPED
+        return YSeq(tuple(done.items), done.line)
 
 
 def _mixed_message(first: YScalar, item: YScalar) -> str:

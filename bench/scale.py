@@ -1,0 +1,238 @@
+"""Scale and P3: the manager's cost against the number of nodes, on the simulated backend.
+
+Generated models (:mod:`bench.generated`: N nodes in systems of 10, nested to one root) at
+N = 100 ... 10,000. CPU time (``process_time``) of the whole request, from the call until it is
+done, includes the simulated nodes' own work (they run in this process, with no delays). After
+construction the model and manager are frozen out of the garbage collector's full passes, as
+``sm-bt manager`` does (``gc.freeze()``); construction itself is timed before that.
+
+P3 times the manager's handling of single node events (inference, divergences, request
+progress, events to observers), seen at the backend listener: every node report of a
+whole-system mode change (the median is the goal's figure), and a fault event that flips one
+node's mode and with it every system above it (its worst case).
+"""
+
+from __future__ import annotations
+
+import functools
+import gc
+import statistics
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+from bench.figures import Figure
+from bench.generated import ROOT, model_text, shape
+from sm_bt.engine.backend import BackendListener, NodeReport
+from sm_bt.engine.inference import infer_all
+from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.requests import Request
+from sm_bt.model.loader import load_model_text
+from sm_bt.model.states import State
+from sm_bt.model.types import Model, ParamValue
+from sm_bt.sim import SimBackend
+
+SIZES = (100, 250, 500, 1000, 2500, 5000, 10_000)
+QUICK_SIZES = (100, 250)
+#: Goals of the issue, by figure and N.
+REQUEST_GOALS = {1000: 0.5, 10_000: 5.0}
+CONSTRUCTION_GOAL = {10_000: 2.0}
+EVENT_GOAL_US = {10_000: 50.0}
+FULL_OVER_EVENT_GOAL = 100.0
+GROWTH_GOAL = 1.5
+FAULT_EVENTS, QUICK_FAULT_EVENTS = 2000, 200
+
+
+@functools.lru_cache(maxsize=2)
+def model(nodes: int) -> Model:
+    return load_model_text(model_text(nodes), f"generated-{nodes}.yaml")
+
+
+class _TimedListener:
+    """Passes every report on to the manager's listener, timing each one while ``on``."""
+
+    def __init__(self, listener: BackendListener) -> None:
+        self._listener = listener
+        self.on = False
+        self.times: list[float] = []
+
+    def _timed(self, call: Callable[[], None]) -> None:
+        if not self.on:
+            call()
+            return
+        start = time.perf_counter()
+        call()
+        self.times.append(time.perf_counter() - start)
+
+    def node_appeared(self, node: str, report: NodeReport) -> None:
+        self._timed(lambda: self._listener.node_appeared(node, report))
+
+    def node_state(self, node: str, state: State) -> None:
+        self._timed(lambda: self._listener.node_state(node, state))
+
+    def node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> None:
+        self._timed(lambda: self._listener.node_parameters(node, changed))
+
+    def node_vanished(self, node: str, reason: str) -> None:
+        self._timed(lambda: self._listener.node_vanished(node, reason))
+
+
+class _Rig:
+    """A manager over simulated nodes that all start ``state``, its construction timed."""
+
+    def __init__(self, model: Model, state: State) -> None:
+        self.backend = SimBackend(model, transition_delay=0.0, error_delay=0.0, parameter_delay=0.0,
+                                  initial_state=state, history=False)
+        attach = self.backend.attach
+        self.listener: _TimedListener | None = None
+
+        def timed_attach(nodes: Sequence[str], listener: BackendListener) -> None:
+            self.listener = _TimedListener(listener)
+            attach(nodes, self.listener)
+
+        self.backend.attach = timed_attach  # type: ignore[method-assign]
+        gc.collect()
+        start = time.process_time()
+        self.manager = ModeManager(model, self.backend)
+        self.construction = time.process_time() - start
+
+    def drive(self, request: Request) -> None:
+        """Run the simulation until ``request`` is done; it must have succeeded."""
+        for _ in range(100):
+            if request.done:
+                break
+            self.backend.clock.advance(1.0)
+        if not request.succeeded:
+            raise RuntimeError(f"{request.description} did not succeed: {request.reason}")
+
+
+@contextmanager
+def _frozen() -> Iterator[None]:
+    """As ``sm-bt manager`` runs: what exists now stays out of full collections."""
+    gc.collect()
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+
+
+def _cpu(work: Callable[[], None]) -> float:
+    start = time.process_time()
+    work()
+    return time.process_time() - start
+
+
+def _fault_events(rig: _Rig, count: int) -> list[float]:
+    """Flip one node in the middle of the model out of its mode and back, ``count`` times."""
+    nodes = shape(len(rig.manager.model.nodes))[0].nodes
+    index = len(nodes) // 2
+    node, settled = nodes[index], 1.0 + index % 7  # its FAST speed (bench.generated)
+    assert rig.listener is not None
+    rig.listener.times.clear()
+    rig.listener.on = True
+    for i in range(count):
+        rig.backend.set_parameter(node, "speed", 99.0 if i % 2 == 0 else settled)
+    rig.listener.on = False
+    return list(rig.listener.times)
+
+
+def _full_inference(rig: _Rig) -> float:
+    manager = rig.manager
+    observations = {node.name: manager.observation(node.name) for node in manager.model.nodes}
+    targets = {part: target for part in manager.model.parts if (target := manager.target(part)) is not None}
+    times = []
+    for _ in range(3):
+        start = time.perf_counter()
+        infer_all(manager.model, observations, targets)
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def _from_active(loaded: Model, fault_events: int) -> dict[str, Any]:
+    """Construction, the mode change, and the node events (of three mode changes, and faults)."""
+    rig = _Rig(loaded, State.ACTIVE)
+    listener = rig.listener
+    assert listener is not None
+    out: dict[str, Any] = {"construction": rig.construction}
+    with _frozen():
+        listener.on = True
+        out["mode_change"] = _cpu(lambda: rig.drive(rig.manager.change_mode(ROOT, "FAST")))
+        rig.drive(rig.manager.change_mode(ROOT, "__DEFAULT__"))
+        rig.drive(rig.manager.change_mode(ROOT, "FAST"))
+        listener.on = False
+        out["change_events"] = list(listener.times)
+        out["fault_events"] = _fault_events(rig, fault_events)
+        out["full_inference"] = _full_inference(rig)
+    return out
+
+
+def _bring_up(loaded: Model, *, one_request: bool) -> float:
+    rig = _Rig(loaded, State.UNCONFIGURED)
+
+    def requests() -> None:
+        if one_request:
+            rig.drive(rig.manager.change_mode(ROOT, "__DEFAULT__"))
+        else:
+            rig.drive(rig.manager.change_state(ROOT, "configure"))
+            rig.drive(rig.manager.change_state(ROOT, "activate"))
+
+    with _frozen():
+        return _cpu(requests)
+
+
+def measure(nodes: int, fault_events: int) -> dict[str, Any]:
+    """Every scale and P3 figure for one N (seconds)."""
+    loaded = model(nodes)
+    out = _from_active(loaded, fault_events)
+    out["bring_up_one"] = _bring_up(loaded, one_request=True)
+    out["bring_up_two"] = _bring_up(loaded, one_request=False)
+    return out
+
+
+def run(quick: bool) -> list[Figure]:
+    sizes = QUICK_SIZES if quick else SIZES
+    figures: list[Figure] = []
+    medians: dict[int, float] = {}
+    for nodes in sizes:
+        got = measure(nodes, QUICK_FAULT_EVENTS if quick else FAULT_EVENTS)
+        systems = len(shape(nodes)[0].systems)
+        common = {"N": nodes, "systems": systems, "gc": "frozen after construction (as sm-bt manager)"}
+        for key, name in (("mode_change", "whole-system mode change"),
+                          ("bring_up_one", "bring-up, one change_mode"),
+                          ("bring_up_two", "bring-up, configure + activate")):
+            figures.append(Figure("scale", f"{name}, N={nodes}", got[key], "s", REQUEST_GOALS.get(nodes),
+                                  details=common))
+        figures.append(Figure("scale", f"ModeManager construction, N={nodes}", got["construction"], "s",
+                              CONSTRUCTION_GOAL.get(nodes), details={"N": nodes, "gc": "as is"}))
+        change = statistics.median(got["change_events"]) * 1e6
+        fault = statistics.median(got["fault_events"]) * 1e6
+        medians[nodes] = change
+        events = {**common, "events": len(got["change_events"]),
+                  "p90_us": round(sorted(got["change_events"])[int(0.9 * len(got["change_events"]))] * 1e6, 1)}
+        figures.append(Figure("P3", f"node event during a mode change, median, N={nodes}", change, "µs",
+                              EVENT_GOAL_US.get(nodes), details=events))
+        figures.append(Figure("P3", f"fault event flipping a node and its systems, median, N={nodes}", fault, "µs",
+                              details={**common, "events": len(got["fault_events"]),
+                                       "parts_flipped": 1 + _depth(nodes)}))
+        if nodes == sizes[-1]:
+            full = got["full_inference"] * 1e6
+            for label, value in (("node event during a mode change", change), ("fault event", fault)):
+                figures.append(Figure("P3", f"full re-inference / {label}, N={nodes}", full / value, "x",
+                                      FULL_OVER_EVENT_GOAL if nodes == 10_000 else None, op=">=",
+                                      details={"full_us": round(full, 1)}))
+    if 1000 in medians and 10_000 in medians:
+        figures.append(Figure("P3", "node event growth, N=10000 / N=1000", medians[10_000] / medians[1000], "x",
+                              GROWTH_GOAL, details={"N=1000_us": round(medians[1000], 1),
+                                                    "N=10000_us": round(medians[10_000], 1)}))
+    return figures
+
+
+def _depth(nodes: int) -> int:
+    """How many systems are above a node in the generated model."""
+    depth, level = 0, nodes
+    while level > 1:
+        level = -(-level // 10)
+        depth += 1
+    return depth
