@@ -44,6 +44,13 @@ stress: $(STAMP)
 	SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests $(BIN)/python -m pytest -q -p stress_summary \
 		tests/test_manager_properties.py
 
+# The performance goals (README, "Performance"): a table with each goal, build/bench/results.json
+# and build/bench/scaling.png; exit status 1 if a goal is not met. About 10 minutes on 2 cores.
+.PHONY: bench
+bench: $(STAMP)
+	@mkdir -p $(ROS_LOG_DIR)
+	$(BIN)/python -m bench
+
 # mypy cannot follow the editable install's mapping of behaviours/ and trees/ onto sm_bt.*, so it
 # checks a symlinked view of the installed layout (build/typecheck/sm_bt).
 TYPECHECK := build/typecheck

@@ -30,6 +30,7 @@ executor (see :mod:`sm_bt.ros.runtime`); the backend never spins it itself.
 
 from __future__ import annotations
 
+import collections
 import enum
 import logging
 import threading
@@ -47,7 +48,7 @@ from rclpy.qos import QoSProfile, qos_profile_parameter_events
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
 from sm_bt.engine.clock import TimerHandle, WallClock
-from sm_bt.engine.lifecycle import Transition
+from sm_bt.engine.lifecycle import REQUESTABLE, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros.parameters import from_parameter_value, from_parameters, to_parameters
@@ -77,6 +78,15 @@ class _Call:
 
 
 @dataclass(eq=False)
+class _SetInFlight:
+    """A parameter set of ours not answered yet, and the parameters whose event already came."""
+
+    values: dict[str, ParamValue]
+    outside_before: dict[str, int]
+    echoed: set[str] = field(default_factory=set)
+
+
+@dataclass(eq=False)
 class _Peer:
     """What the backend knows about one node of the model."""
 
@@ -102,6 +112,13 @@ class _Peer:
     buffered_parameters: dict[str, ParamValue] = field(default_factory=dict)
     events: int = 0  # transition events received; tells a probe answer from a stale one
     gone: str = ""  # why it vanished (while absent after having been present)
+    # Our own changes, reported from the service responses: the events that echo them later are
+    # not reported again (an earlier set's late echo must not undo a newer confirmed value).
+    echoes: dict[str, collections.deque[tuple[ParamValue, float]]] = field(default_factory=dict)
+    state_echoes: collections.deque[tuple[State, float]] = field(default_factory=collections.deque)
+    sets_in_flight: list[_SetInFlight] = field(default_factory=list)
+    transitions_in_flight: list[list[State]] = field(default_factory=list)  # states seen meanwhile
+    outside: dict[str, int] = field(default_factory=dict)  # changes by others reported, per parameter
 
     @property
     def busy(self) -> bool:
@@ -185,8 +202,10 @@ class RosBackend:
             return
         request = ChangeState.Request()
         request.transition = TransitionMsg(id=int(transition), label=transition.label)
+        seen: list[State] = []  # transition events received while the call is in flight
         with self._lock:
             events_before = peer.events
+            peer.transitions_in_flight.append(seen)
 
         def fail(reason: str, refused: bool = False) -> None:
             self._dispatch(lambda: done(CallResult(False, reason, refused)))
@@ -205,7 +224,10 @@ class RosBackend:
                  f"(available: {', '.join(available) or 'none'})", refused=True)
 
         def answered(response: Any) -> None:
+            with self._lock:
+                _discard(peer.transitions_in_flight, seen)
             if response.success:
+                self._transition_confirmed(peer, transition, seen)
                 self._dispatch(lambda: done(CallResult(True)))
                 return
             self._call(peer, peer.get_transitions, GetAvailableTransitions.Request(), "get_available_transitions",
@@ -213,8 +235,33 @@ class RosBackend:
                        lambda reason: fail(f"{transition.label} of {node} failed: the node answered success=false"),
                        busy=False)
 
+        def unanswered(reason: str) -> None:
+            with self._lock:
+                _discard(peer.transitions_in_flight, seen)
+            fail(reason)
+
         self._call(peer, peer.change_state, request, f"change_state {transition.label}", self.call_timeout,
-                   answered, fail)
+                   answered, unanswered)
+
+    def _transition_confirmed(self, peer: _Peer, transition: Transition, seen: list[State]) -> None:
+        """A transition of ours succeeded: the node is in its goal now; report that at once and
+        expect the events of it that have not come yet (the transition state, the goal)."""
+        step = next((s for s in REQUESTABLE if s.transition is transition), None)
+        if step is None:
+            return
+        deadline = self._clock.now() + ECHO_WINDOW
+        with self._lock:
+            for state in (step.via, step.goal):
+                if state in seen:
+                    seen.remove(state)
+                else:
+                    peer.state_echoes.append((state, deadline))
+            if peer.presence is not _Presence.PRESENT or peer.state is step.goal:
+                return
+            peer.state = step.goal
+            listener = self._listener
+        if listener is not None:
+            self._dispatch(lambda: listener.node_state(peer.part, step.goal))
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         peer = self._peer(node)
@@ -229,16 +276,46 @@ class RosBackend:
             self._dispatch(lambda: done(CallResult(False, refusal)))
             return
 
+        values = dict(parameters)
+        with self._lock:
+            in_flight = _SetInFlight(values, {name: peer.outside.get(name, 0) for name in values})
+            peer.sets_in_flight.append(in_flight)
+
         def answered(response: Any) -> None:
             result = response.result
-            if result.successful:
-                self._dispatch(lambda: done(CallResult(True)))
-            else:
+            with self._lock:
+                _discard(peer.sets_in_flight, in_flight)
+                if result.successful:
+                    confirmed = self._confirmed_set(peer, in_flight)
+                listener = self._listener
+            if not result.successful:
                 why = result.reason or "no reason given"
                 self._dispatch(lambda: done(CallResult(False, f"set_parameters on {node} rejected: {why}")))
+                return
+            if confirmed and listener is not None:  # the answer says what the node now holds
+                self._dispatch(lambda: listener.node_parameters(peer.part, confirmed))
+            self._dispatch(lambda: done(CallResult(True)))
+
+        def failed(reason: str) -> None:
+            with self._lock:
+                _discard(peer.sets_in_flight, in_flight)  # if it was applied after all, its event tells
+            self._dispatch(lambda: done(CallResult(False, reason)))
 
         self._call(peer, peer.set_parameters, request, "set_parameters_atomically", self.call_timeout,
-                   answered, lambda reason: self._dispatch(lambda: done(CallResult(False, reason))))
+                   answered, failed)
+
+    def _confirmed_set(self, peer: _Peer, in_flight: _SetInFlight) -> dict[str, ParamValue]:
+        """A set of ours succeeded (lock held): the values to report now (not those someone else
+        changed since it was sent), and the echoes still to come."""
+        deadline = self._clock.now() + ECHO_WINDOW
+        confirmed = {}
+        for name, value in in_flight.values.items():
+            if peer.outside.get(name, 0) != in_flight.outside_before[name]:
+                continue  # changed by someone else meanwhile: that report stands
+            confirmed[name] = value
+            if name not in in_flight.echoed:
+                peer.echoes.setdefault(name, collections.deque()).append((value, deadline))
+        return confirmed
 
     # -- discovery, acquisition, liveness (clock thread) ------------------------------------------
 
@@ -394,7 +471,11 @@ class RosBackend:
         state = _state_of(message.goal_state.id)
         with self._lock:
             peer.events += 1
-            peer.last_heard = self._clock.now()
+            now = peer.last_heard = self._clock.now()
+            if _echo(peer.state_echoes, state, now):
+                return  # a transition of ours, already reported from its answer
+            for seen in peer.transitions_in_flight:
+                seen.append(state)
             if peer.presence is _Presence.ACQUIRING:
                 peer.buffered_state = state
                 return
@@ -415,13 +496,32 @@ class RosBackend:
         if not changed:
             return
         with self._lock:
-            peer.last_heard = self._clock.now()
+            now = peer.last_heard = self._clock.now()
+            changed = self._not_ours(peer, changed, now)
+            if not changed:
+                return
             if peer.presence is _Presence.ACQUIRING:
                 peer.buffered_parameters.update(changed)
                 return
             listener = self._listener if peer.presence is _Presence.PRESENT else None
         if listener is not None:
             self._dispatch(lambda: listener.node_parameters(peer.part, changed))
+
+    @staticmethod
+    def _not_ours(peer: _Peer, changed: dict[str, ParamValue], now: float) -> dict[str, ParamValue]:
+        """The changes of a parameter event that are not echoes of our own sets (lock held)."""
+        others = {}
+        for name, value in changed.items():
+            if _echo(peer.echoes.get(name), value, now):
+                continue  # reported from the answer to our set
+            mine = next((s for s in peer.sets_in_flight if name not in s.echoed and _same(s.values.get(name), value)),
+                        None)
+            if mine is not None:
+                mine.echoed.add(name)  # our set, answered soon: reported then
+                continue
+            peer.outside[name] = peer.outside.get(name, 0) + 1
+            others[name] = value
+        return others
 
     # -- calls ---------------------------------------------------------------------------------------
 
@@ -503,6 +603,35 @@ class RosBackend:
     def _dispatch(self, action: Callable[[], None]) -> None:
         """Hand a report or a ``done`` to the listener's side: the clock thread, in order."""
         self._clock.call_later(0.0, action)
+
+
+#: How long an echo of our own change is waited for; after that, an equal value is news again.
+ECHO_WINDOW = 5.0
+
+
+def _same(a: object, b: object) -> bool:
+    return type(a) is type(b) and a == b
+
+
+def _echo(expected: collections.deque[tuple[Any, float]] | None, value: object, now: float) -> bool:
+    """Is ``value`` the next expected echo (consumed if so)? Expired expectations are dropped
+    first. Only the next one may match: a node publishes its events in order, and a value that is
+    not the next echo is someone else's (reporting it can only tell the truth)."""
+    if not expected:
+        return False
+    while expected and expected[0][1] < now:
+        expected.popleft()
+    if expected and _same(expected[0][0], value):
+        expected.popleft()
+        return True
+    return False
+
+
+def _discard(items: list[Any], item: object) -> None:
+    for index, candidate in enumerate(items):
+        if candidate is item:
+            del items[index]
+            return
 
 
 def _state_of(state_id: int) -> State:

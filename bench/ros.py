@@ -1,0 +1,329 @@
+"""P1, P2 and idle: the manager over real ROS 2 against raw rclpy calls, in the same run.
+
+One child process runs 20 rclpy lifecycle nodes (``python -m sm_bt.ros.sim_nodes``) of a model
+made here: one system ``robot`` of 20 nodes, 5 parameters each, two modes that differ in all of
+them. This process holds the embedded manager (``RosRuntime``, serving the system_modes interface)
+and a plain rclpy client of its own (another context, node and executor): the floor.
+
+* P1: a confirmed reconfiguration through the manager (the request is done and succeeded),
+  against the same ``set_parameters_atomically``/``change_state`` calls made by the plain client
+  to all nodes at once and awaited; (a) a mode switch, (b) bring-up as two requests (configure,
+  activate), (c) bring-up as one ``change_mode`` from unconfigured. Manager and floor alternate;
+  the figure is the ratio of medians. The manager runs with rules and recovery off, so that the
+  floor's calls (which move the nodes behind its back) are not undone.
+* P2: from the node event that completes a mode switch (the last ``/parameter_events`` message
+  of the nodes, as the client receives it) to the system's ``mode_event`` from the manager.
+* Idle: CPU of an ``sm-bt manager`` process over the 20 idle nodes, and the time it takes the
+  embedded manager to see a node vanish when the nodes' process is killed.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from bench.figures import Figure
+from sm_bt.engine.manager import ModeManager
+from sm_bt.model.states import State
+from sm_bt.model.types import Model, NodeMode
+
+SYSTEM = "robot"
+P1_GOAL, P2_GOAL_MS, IDLE_GOAL, VANISH_GOAL = 1.25, 10.0, 1.0, 2.0
+TIMEOUT = 20.0
+
+
+def model_text(nodes: int) -> str:
+    names = [f"bench_n{i}" for i in range(nodes)]
+    out = [f"{SYSTEM}:\n  ros__parameters:\n    type: system\n    parts:\n"]
+    out += [f"      {name}\n" for name in names]
+    out.append("    modes:\n")
+    for mode in ("__DEFAULT__", "FAST"):
+        out.append(f"      {mode}:\n" + "".join(f"        {name}: active.{mode}\n" for name in names))
+    for index, name in enumerate(names):
+        out.append(f"{name}:\n  ros__parameters:\n    type: node\n    modes:\n")
+        for scale, mode in enumerate(("__DEFAULT__", "FAST"), start=1):
+            out.append(f"      {mode}:\n        ros__parameters:\n"
+                       f"          speed: {0.5 * scale + index}\n          rate: {10 * scale}\n"
+                       f"          planner: \"{mode.strip('_').lower()}\"\n"
+                       f"          enabled: {'true' if scale == 2 else 'false'}\n"
+                       f"          tolerance: {0.1 * scale}\n")
+    return "".join(out)
+
+
+class _Floor:
+    """A plain rclpy client: calls every node at once and waits for every answer."""
+
+    def __init__(self, nodes: Sequence[str]) -> None:
+        import rclpy
+        from lifecycle_msgs.srv import ChangeState
+        from rcl_interfaces.msg import ParameterEvent
+        from rcl_interfaces.srv import SetParametersAtomically
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import qos_profile_parameter_events
+        from rclpy.signals import SignalHandlerOptions
+        from system_modes_msgs.msg import ModeEvent
+
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node("sm_bt_bench_floor", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.nodes = list(nodes)
+        self.change = {n: self.node.create_client(ChangeState, f"/{n}/change_state") for n in nodes}
+        self.set = {n: self.node.create_client(SetParametersAtomically, f"/{n}/set_parameters_atomically")
+                    for n in nodes}
+        self.parameter_events: list[tuple[float, str]] = []  # (receive time, node)
+        self.mode_events: list[tuple[float, str]] = []  # (receive time, mode)
+        self.node.create_subscription(ParameterEvent, "/parameter_events", self._on_parameters,
+                                      qos_profile_parameter_events)
+        self.node.create_subscription(ModeEvent, f"/{SYSTEM}/mode_event", self._on_mode, 10)
+        self._thread = threading.Thread(target=self.executor.spin, daemon=True, name="bench-floor")
+        self._thread.start()
+
+    def _on_parameters(self, message: Any) -> None:
+        self.parameter_events.append((time.perf_counter(), message.node))
+
+    def _on_mode(self, message: Any) -> None:
+        self.mode_events.append((time.perf_counter(), message.goal_mode.label))
+
+    def ready(self) -> None:
+        for client in (*self.change.values(), *self.set.values()):
+            if not client.wait_for_service(timeout_sec=TIMEOUT):
+                raise RuntimeError(f"service {client.srv_name} did not appear within {TIMEOUT:g} s")
+
+    def _all(self, calls: Sequence[tuple[Any, Any]], ok: Callable[[Any], bool]) -> float:
+        """Send every ``(client, request)`` at once; seconds until every answer came (all must be ok)."""
+        remaining = [len(calls)]
+        done = threading.Event()
+        failures: list[str] = []
+
+        def answered(future: Any) -> None:
+            if future.exception() is not None or not ok(future.result()):
+                failures.append(str(future.exception() or future.result()))
+            remaining[0] -= 1
+            if remaining[0] == 0:
+                done.set()
+
+        start = time.perf_counter()
+        for client, request in calls:
+            client.call_async(request).add_done_callback(answered)
+        if not done.wait(TIMEOUT):
+            raise RuntimeError("raw rclpy calls not answered in time")
+        elapsed = time.perf_counter() - start
+        if failures:
+            raise RuntimeError(f"raw rclpy calls failed: {failures[0]}")
+        return elapsed
+
+    def transition(self, label: str) -> float:
+        from lifecycle_msgs.msg import Transition as TransitionMsg
+        from lifecycle_msgs.srv import ChangeState
+
+        from sm_bt.engine.lifecycle import Transition
+
+        ids = {t.label: int(t) for t in Transition if int(t) < 10 and t.label != "shutdown"}
+        calls = [(self.change[n], ChangeState.Request(transition=TransitionMsg(id=ids[label], label=label)))
+                 for n in self.nodes]
+        return self._all(calls, lambda response: bool(response.success))
+
+    def parameters(self, values: dict[str, dict[str, Any]]) -> float:
+        from rcl_interfaces.srv import SetParametersAtomically
+
+        from sm_bt.ros.parameters import to_parameters
+
+        calls = [(self.set[n], SetParametersAtomically.Request(parameters=to_parameters(values[n])))
+                 for n in self.nodes]
+        return self._all(calls, lambda response: bool(response.result.successful))
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
+        self._thread.join(2.0)
+
+
+def _node_values(model: Model, node: str, mode: str) -> dict[str, Any]:
+    spec = model.part(node).modes[mode]
+    assert isinstance(spec, NodeMode)
+    return spec.values()
+
+
+def _confirmed(runtime: Any, start: Callable[[], Any]) -> float:
+    """Seconds from making the manager request to its being done; it must have succeeded."""
+    done = threading.Event()
+    began = time.perf_counter()
+    request = start()
+    request.add_done_callback(lambda _request: done.set())
+    if not done.wait(TIMEOUT):
+        raise RuntimeError(f"{request.description} not done in {TIMEOUT:g} s: {request.feedback}")
+    elapsed = time.perf_counter() - began
+    if not request.succeeded:
+        raise RuntimeError(f"{request.description} failed: {request.reason}")
+    return elapsed
+
+
+def _wait(condition: Callable[[], bool], what: str, limit: float = TIMEOUT) -> float:
+    began = time.perf_counter()
+    while not condition():
+        if time.perf_counter() - began > limit:
+            raise RuntimeError(f"{what}: not within {limit:g} s")
+        time.sleep(0.002)
+    return time.perf_counter() - began
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _idle_cpu(path: Path, seconds: float) -> float:
+    """Percent of one core an ``sm-bt manager`` process uses over the idle nodes."""
+    manager = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "manager", str(path), "--log-level", "warning"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(5.0)  # start-up and discovery are not idle
+        if manager.poll() is not None:
+            raise RuntimeError(f"sm-bt manager exited: {manager.stderr.read()[-500:] if manager.stderr else ''}")
+        before, began = _cpu_seconds(manager.pid), time.perf_counter()
+        time.sleep(seconds)
+        return 100 * (_cpu_seconds(manager.pid) - before) / (time.perf_counter() - began)
+    finally:
+        manager.send_signal(signal.SIGINT)
+        try:
+            manager.wait(3.0)
+        except subprocess.TimeoutExpired:
+            manager.kill()
+            manager.wait(3.0)
+
+
+def run(quick: bool) -> list[Figure]:
+    from sm_bt.ros.environment import prepare, require_ros
+
+    prepare(own_domain=True)
+    require_ros()
+    from sm_bt.model.loader import load_model
+    from sm_bt.ros.node_process import NodesProcess
+    from sm_bt.ros.runtime import RosRuntime
+
+    count, repeats, idle_window = (3, 2, 2.0) if quick else (20, 12, 10.0)
+    figures: list[Figure] = []
+    with tempfile.TemporaryDirectory(prefix="sm_bt-bench-ros-") as tmp:
+        path = Path(tmp) / "bench_ros.yaml"
+        path.write_text(model_text(count))
+        model = load_model(path)
+        names = [f"bench_n{i}" for i in range(count)]
+        values = {mode: {n: _node_values(model, n, mode) for n in names} for mode in ("__DEFAULT__", "FAST")}
+        process = NodesProcess(str(path), "--state", "unconfigured").start()
+        floor: _Floor | None = None
+        runtime: Any = None
+        try:
+            floor = _Floor(names)
+            floor.ready()
+            runtime = RosRuntime(model, manager_options={"rules": False, "recovery": False})
+            manager = runtime.manager
+            _wait(lambda: all(manager.observation(n).reachable for n in names), "the manager sees every node")
+            figures += _p1_p2(floor, manager, values, repeats, count)
+            figures.append(Figure("idle", f"manager process CPU, {count} idle nodes", _idle_cpu(path, idle_window),
+                                  "% of a core", IDLE_GOAL, details={"window_s": idle_window}))
+            began = time.perf_counter()
+            process.kill()
+            detected = _wait(lambda: not manager.observation(names[0]).reachable, "vanish detected", 30.0)
+            figures.append(Figure("idle", "vanished node detected after the process was killed",
+                                  detected, "s", VANISH_GOAL, details={"killed_at": began}))
+        finally:
+            if runtime is not None:
+                runtime.close()
+            if floor is not None:
+                floor.close()
+            process.stop()
+    return figures
+
+
+def _p1_p2(floor: _Floor, manager: ModeManager, values: dict[str, dict[str, dict[str, Any]]], repeats: int,
+           count: int) -> list[Figure]:
+    times: dict[str, list[float]] = {key: [] for key in ("switch", "switch_floor", "two", "one", "bring_floor")}
+    delays: list[float] = []
+
+    def seen(state: State) -> None:
+        """Untimed: the floor moved the nodes behind the manager's back; let it see where they are."""
+        _wait(lambda: all(manager.observation(n).state is state for n in floor.nodes), f"manager sees {state.label}")
+
+    def reset() -> None:  # every node unconfigured, with the __DEFAULT__ values (untimed)
+        floor.transition("deactivate")
+        floor.transition("cleanup")
+        seen(State.UNCONFIGURED)
+
+    def floor_bring_up() -> float:
+        elapsed = floor.transition("configure") + floor.transition("activate")
+        seen(State.ACTIVE)
+        return elapsed
+
+    # Bring-up, alternating: the manager's two requests, the floor, the manager's one request, the floor.
+    for _ in range(repeats):
+        times["two"].append(_confirmed(manager, lambda: manager.change_state(SYSTEM, "configure"))
+                            + _confirmed(manager, lambda: manager.change_state(SYSTEM, "activate")))
+        reset()
+        times["bring_floor"].append(floor_bring_up())
+        reset()
+        times["one"].append(_confirmed(manager, lambda: manager.change_mode(SYSTEM, "__DEFAULT__")))
+        reset()
+        times["bring_floor"].append(floor_bring_up())
+        if _ != repeats - 1:
+            reset()
+    def manager_to(mode: str) -> None:
+        floor.parameter_events.clear()
+        floor.mode_events.clear()
+        times["switch"].append(_confirmed(manager, lambda: manager.change_mode(SYSTEM, mode)))
+
+        def published() -> bool:
+            return len({n for _, n in floor.parameter_events}) >= count and any(
+                m == mode for _, m in floor.mode_events)
+
+        try:
+            _wait(published, "events of the switch", 5.0)
+        except RuntimeError:
+            raise RuntimeError(f"events of the switch to {mode}: parameter events from "
+                               f"{sorted({n for _, n in floor.parameter_events})}, mode events "
+                               f"{[m for _, m in floor.mode_events]}, {SYSTEM} {manager.actual(SYSTEM)}") from None
+        last_node_event = max(t for t, _ in floor.parameter_events[:count])  # one message per atomic set
+        delays.append(min(t for t, m in floor.mode_events if m == mode) - last_node_event)
+
+    def floor_to(mode: str) -> None:
+        times["switch_floor"].append(floor.parameters(values[mode]))
+        _wait(lambda: all(manager.observation(n).parameters == values[mode][n] for n in floor.nodes),
+              "manager sees the floor's values")
+
+    # Mode switches: the manager there and back, then the floor there and back (the nodes end where
+    # the manager's target wants them, so its next switch is a real one and publishes mode_event).
+    for _ in range(repeats):
+        manager_to("FAST")
+        manager_to("__DEFAULT__")
+        floor_to("FAST")
+        floor_to("__DEFAULT__")
+
+    def ratio(ours: str, floor_key: str) -> tuple[float, dict[str, Any]]:
+        mine, base = statistics.median(times[ours]), statistics.median(times[floor_key])
+        return mine / base, {"sm_bt_ms": round(mine * 1e3, 1), "floor_ms": round(base * 1e3, 1),
+                             "repeats": len(times[ours]), "nodes": count}
+
+    figures = []
+    for key, floor_key, label in (("switch", "switch_floor", "(a) mode switch setting parameters"),
+                                  ("two", "bring_floor", "(b) bring-up as configure + activate"),
+                                  ("one", "bring_floor", "(c) bring-up as one change_mode")):
+        value, details = ratio(key, floor_key)
+        figures.append(Figure("P1", f"{label}, {count} nodes / raw rclpy", value, "x", P1_GOAL, details=details))
+    delays_ms = [d * 1e3 for d in delays]
+    figures.append(Figure("P2", "system mode_event after the last node event, median", statistics.median(delays_ms),
+                          "ms", P2_GOAL_MS, details={"max_ms": round(max(delays_ms), 2), "samples": len(delays)}))
+    figures.append(Figure("P2", "system mode_event after the last node event, max", max(delays_ms), "ms",
+                          P2_GOAL_MS, details={"samples": len(delays)}))
+    return figures

@@ -1,0 +1,93 @@
+"""The ROS backend reports our own changes from the service responses and does not report their
+echoes (``/parameter_events``, ``transition_event``) again, while changes by anyone else still are.
+
+The bookkeeping is checked here without a ROS graph (a backend object with only its clock), so
+that the orderings that are rare on a real graph can be played exactly: an echo before the
+answer, a late echo of an earlier set, someone else's change between our set and its answer.
+"""
+
+from __future__ import annotations
+
+import threading
+
+from sm_bt.engine.clock import VirtualClock
+from sm_bt.engine.lifecycle import Transition
+from sm_bt.model.states import State
+from sm_bt.ros.backend import ECHO_WINDOW, RosBackend, _echo, _Peer, _Presence, _SetInFlight
+
+
+class _Listener:
+    def __init__(self) -> None:
+        self.states: list[State] = []
+
+    def node_state(self, node: str, state: State) -> None:
+        self.states.append(state)
+
+
+def _backend() -> tuple[RosBackend, _Peer, _Listener, VirtualClock]:
+    backend = RosBackend.__new__(RosBackend)  # the bookkeeping only: no rclpy node
+    clock = VirtualClock()
+    listener = _Listener()
+    backend._clock = clock  # type: ignore[assignment]
+    backend._listener = listener  # type: ignore[assignment]
+    backend._lock = threading.Lock()
+    peer = _Peer("amcl", "/amcl", ("alpha",), None, None, None, None, None, None, presence=_Presence.PRESENT,
+                 state=State.INACTIVE)
+    return backend, peer, listener, clock
+
+
+def _send(peer: _Peer, values: dict[str, object]) -> _SetInFlight:
+    in_flight = _SetInFlight(dict(values), {name: peer.outside.get(name, 0) for name in values})  # type: ignore[arg-type]
+    peer.sets_in_flight.append(in_flight)
+    return in_flight
+
+
+def _answer(backend: RosBackend, peer: _Peer, in_flight: _SetInFlight) -> dict[str, object]:
+    peer.sets_in_flight.remove(in_flight)
+    return dict(backend._confirmed_set(peer, in_flight))
+
+
+def test_late_echoes_of_two_confirmed_sets_are_not_reported() -> None:
+    backend, peer, _, clock = _backend()
+    first, second = _send(peer, {"alpha": 0.1}), _send(peer, {"alpha": 0.2})
+    assert _answer(backend, peer, first) == {"alpha": 0.1}
+    assert _answer(backend, peer, second) == {"alpha": 0.2}
+    # The first set's echo arrives after the second was confirmed: it must not undo it.
+    assert backend._not_ours(peer, {"alpha": 0.1}, clock.now()) == {}
+    assert backend._not_ours(peer, {"alpha": 0.2}, clock.now()) == {}
+    # Nothing is expected any more: the same value again is someone else's change.
+    assert backend._not_ours(peer, {"alpha": 0.2}, clock.now()) == {"alpha": 0.2}
+
+
+def test_an_echo_before_the_answer_is_not_expected_again() -> None:
+    backend, peer, _, clock = _backend()
+    in_flight = _send(peer, {"alpha": 0.3})
+    assert backend._not_ours(peer, {"alpha": 0.3}, clock.now()) == {}  # reported with the answer
+    assert _answer(backend, peer, in_flight) == {"alpha": 0.3}
+    assert backend._not_ours(peer, {"alpha": 0.3}, clock.now()) == {"alpha": 0.3}
+
+
+def test_a_change_by_someone_else_is_reported_and_wins_over_our_answer() -> None:
+    backend, peer, _, clock = _backend()
+    in_flight = _send(peer, {"alpha": 0.3})
+    assert backend._not_ours(peer, {"alpha": 0.3}, clock.now()) == {}  # our echo
+    assert backend._not_ours(peer, {"alpha": 0.9}, clock.now()) == {"alpha": 0.9}  # then another client
+    assert _answer(backend, peer, in_flight) == {}  # our answer must not report 0.3 over 0.9
+
+
+def test_an_echo_expected_too_long_is_forgotten() -> None:
+    backend, peer, _, clock = _backend()
+    _answer(backend, peer, _send(peer, {"alpha": 0.4}))
+    clock.advance(ECHO_WINDOW + 0.1)
+    assert backend._not_ours(peer, {"alpha": 0.4}, clock.now()) == {"alpha": 0.4}
+
+
+def test_a_confirmed_transition_is_reported_once_and_its_events_are_not() -> None:
+    backend, peer, listener, clock = _backend()
+    seen = [State.ACTIVATING]  # the transition state's event came before the answer
+    backend._transition_confirmed(peer, Transition.ACTIVATE, seen)
+    clock.run_pending()
+    assert listener.states == [State.ACTIVE] and peer.state is State.ACTIVE
+    assert [state for state, _ in peer.state_echoes] == [State.ACTIVE]  # only the goal's event is to come
+    assert _echo(peer.state_echoes, State.ACTIVE, clock.now())
+    assert not _echo(peer.state_echoes, State.ACTIVATING, clock.now())  # anything later is news
