@@ -11,8 +11,11 @@ What the reference manager does not do, and this backend does:
   parameters before anything is reported; transition and parameter events that arrive meanwhile
   are applied after that report, in order.
 * **Liveness.** After a crash, DDS keeps showing a node for its lease (20 s with Fast DDS), so
-  discovery alone cannot tell. Every present node is probed (``get_state``, or ``get_parameters``
-  for plain nodes) every ``probe_interval`` s; no answer for ``liveness_timeout`` s means vanished.
+  discovery alone cannot tell. The nodes of one process share a DDS participant and die together:
+  one node per participant is probed (``get_state``, or ``get_parameters`` for plain nodes) every
+  ``probe_interval`` s, and its answer vouches for the others; no answer for ``liveness_timeout`` s
+  means they vanished. The graph is looked at every ``poll_interval`` s while a node is missing,
+  every ``idle_poll_interval`` s once all are present.
   While a call of ours is in flight the node may be busy in a long transition callback, which
   also blocks its other services: then only that call's own timeout applies. A node that leaves
   the graph cleanly is reported at once.
@@ -112,6 +115,8 @@ class _Peer:
     buffered_parameters: dict[str, ParamValue] = field(default_factory=dict)
     events: int = 0  # transition events received; tells a probe answer from a stale one
     gone: str = ""  # why it vanished (while absent after having been present)
+    participant: bytes | None = None  # the DDS participant (process) hosting it, once known
+    last_asked: float = 0.0  # the last probe of any node of its participant
     # Our own changes, reported from the service responses: the events that echo them later are
     # not reported again (an earlier set's late echo must not undo a newer confirmed value).
     echoes: dict[str, collections.deque[tuple[ParamValue, float]]] = field(default_factory=dict)
@@ -136,8 +141,8 @@ class RosBackend:
     """
 
     def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
-                 acquire_timeout: float = 2.0, probe_interval: float = 0.5, liveness_timeout: float = 2.0,
-                 plain_after: float = 1.0, poll_interval: float = 0.1) -> None:
+                 acquire_timeout: float = 2.0, probe_interval: float = 0.5, liveness_timeout: float = 1.5,
+                 plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 0.25) -> None:
         self._node = node
         self._model = model
         self._clock = clock if clock is not None else WallClock("sm_bt-ros-clock")
@@ -147,6 +152,7 @@ class RosBackend:
         self.liveness_timeout = liveness_timeout
         self.plain_after = plain_after
         self.poll_interval = poll_interval
+        self.idle_poll_interval = idle_poll_interval
         self._lock = threading.Lock()
         self._peers: dict[str, _Peer] = {}
         self._by_fqn: dict[str, _Peer] = {}
@@ -325,25 +331,48 @@ class RosBackend:
             if self._listener is None:
                 return
             peers = list(self._peers.values())
+            probed = self._share_liveness(peers)
         for peer in peers:
             try:
-                self._look_at(peer, now)
+                self._look_at(peer, now, peer in probed)
             except Exception:  # one node's trouble must not stop the others being watched
                 log.exception("watching %s failed", peer.fqn)
         with self._lock:
             if self._listener is not None:
-                self._poll_timer = self._clock.call_later(self.poll_interval, self._poll)
+                settled = all(peer.presence is _Presence.PRESENT for peer in peers)
+                self._poll_timer = self._clock.call_later(
+                    self.idle_poll_interval if settled else self.poll_interval, self._poll)
 
-    def _look_at(self, peer: _Peer, now: float) -> None:
+    @staticmethod
+    def _share_liveness(peers: list[_Peer]) -> set[_Peer]:
+        """Nodes of one participant live and die together (lock held): each hears what any of them
+        heard, and one of them that is not busy is probed for all. Returns the ones to probe."""
+        groups: dict[bytes | str, list[_Peer]] = {}
+        for peer in peers:
+            if peer.presence is _Presence.PRESENT:
+                groups.setdefault(peer.participant or peer.fqn, []).append(peer)
+        probed = set()
+        for members in groups.values():
+            heard = max(member.last_heard for member in members)
+            asked = max(member.last_probe for member in members)
+            for member in members:
+                member.last_heard, member.last_asked = heard, asked
+            probing = next((member for member in members if member.probe is not None), None)
+            probed.add(probing or next((m for m in members if not m.busy), members[0]))
+        return probed
+
+    def _look_at(self, peer: _Peer, now: float, probed: bool) -> None:
         lifecycle_ready = peer.get_state.service_is_ready()
         parameters_ready = peer.get_parameters.service_is_ready()
         with self._lock:
             presence = peer.presence
             if presence is _Presence.PRESENT:
                 gone = not (lifecycle_ready if peer.lifecycle else parameters_ready)
-                silent = (peer.probe is not None and not peer.busy
-                          and now - peer.last_heard > self.liveness_timeout)
-                probe_due = peer.probe is None and now - peer.last_probe >= self.probe_interval
+                # Silent: asked since it (or a node of its process) was last heard, and no word
+                # for liveness_timeout.
+                silent = (not peer.busy and now - peer.last_heard > self.liveness_timeout
+                          and peer.last_asked > peer.last_heard)
+                probe_due = probed and peer.probe is None and now - peer.last_probe >= self.probe_interval
             if presence is _Presence.ABSENT:
                 if lifecycle_ready:
                     peer.plain_since = None
@@ -355,7 +384,8 @@ class RosBackend:
             if gone:
                 self._vanish(peer, f"node {peer.fqn} left the ROS graph")
             elif silent:
-                self._vanish(peer, f"no answer from {peer.fqn} for {self.liveness_timeout:g} s (process gone?)")
+                self._vanish(peer, f"no answer from {peer.fqn} for {self.liveness_timeout:g} s (node exited, or "
+                                   "network unreachable)")
             elif probe_due:
                 self._probe(peer, now)
         elif presence is _Presence.ABSENT:
@@ -389,6 +419,7 @@ class RosBackend:
                     state = peer.buffered_state  # it moved while we asked
                 peer.presence, peer.lifecycle, peer.state, peer.gone = _Presence.PRESENT, lifecycle, state, ""
                 peer.last_heard = peer.last_probe = self._clock.now()
+                peer.participant = self._participant_of(peer)
                 later = dict(peer.buffered_parameters)
             # DEBUG: the manager logs the node appearing (one line per event at INFO).
             log.debug("node %s appeared: %s%s", peer.fqn, state.label, "" if lifecycle else " (parameters only)")
@@ -586,6 +617,19 @@ class RosBackend:
             TransitionEvent, f"{fqn}/transition_event", lambda message: self._on_transition_event(peer, message),
             QoSProfile(depth=10)))
         return peer
+
+    def _participant_of(self, peer: _Peer) -> bytes | None:
+        """The GUID prefix of the DDS participant that publishes the node's events (its process)."""
+        name = peer.fqn.rsplit("/", 1)
+        namespace, node_name = (name[0] or "/"), name[1]
+        try:
+            for topic in (f"{peer.fqn}/transition_event", "/parameter_events"):
+                for info in self._node.get_publishers_info_by_topic(topic):
+                    if info.node_name == node_name and info.node_namespace == namespace:
+                        return bytes(info.endpoint_gid[:12])
+        except Exception:  # the graph query is an optimisation: without it the node is probed alone
+            log.debug("no participant known for %s", peer.fqn, exc_info=True)
+        return None
 
     def _peer(self, node: str) -> _Peer:
         with self._lock:

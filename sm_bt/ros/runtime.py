@@ -6,11 +6,15 @@
         tree.setup(manager=ros.manager)
         ...tick...
 
-It owns its own rclpy context (so it never disturbs another user of rclpy in the process), spins
-its node in one background thread (py_trees ticks in the caller's thread; the manager is
-thread-safe), and by default serves the reference's mode manager interface
-(:class:`~sm_bt.ros.manager_node.ModeManagerServer`) from the same node. ``close()`` stops in the
-order rclpy needs: executor first, then the manager and backend, then the node and context.
+It owns its own rclpy context (so it never disturbs another user of rclpy in the process; its
+nodes share one DDS participant) and two nodes, each spun by its own executor thread (py_trees
+ticks in the caller's thread; the manager is thread-safe): ``node`` serves the reference's mode
+manager interface (:class:`~sm_bt.ros.manager_node.ModeManagerServer`), ``backend_node``
+(``<name>_backend``) talks to the managed nodes. Apart, each executor wakes over its own
+entities only: rclpy's executor rebuilds its wait set over every entity of its nodes for every
+message it handles (with 20 nodes, 1.9 ms together, 0.8 ms for the backend's alone), and the
+backend handles one per answer and event. ``close()`` stops in the order rclpy needs: executors
+first, then the manager and backend, then the nodes and context.
 """
 
 from __future__ import annotations
@@ -60,11 +64,17 @@ class RosRuntime:
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.clock = WallClock("sm_bt-ros-clock")
         self.node = rclpy.create_node(node_name, context=self.context)
+        self.backend_node = rclpy.create_node(f"{node_name}_backend", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, name="sm_bt-ros-executor", daemon=True)
-        self._thread.start()
-        self.backend = RosBackend(self.node, model, clock=self.clock, **dict(backend_options or {}))
+        self.backend_executor = SingleThreadedExecutor(context=self.context)
+        self.backend_executor.add_node(self.backend_node)
+        self._threads = [threading.Thread(target=self._spin, args=(executor,), name=name, daemon=True)
+                         for executor, name in ((self.executor, "sm_bt-ros-executor"),
+                                                (self.backend_executor, "sm_bt-ros-backend-executor"))]
+        for thread in self._threads:
+            thread.start()
+        self.backend = RosBackend(self.backend_node, model, clock=self.clock, **dict(backend_options or {}))
         self.manager = ModeManager(model, self.backend, **dict(manager_options or {}))
         self.server = ModeManagerServer(self.node, self.manager) if serve else None
         self._closed = False
@@ -85,25 +95,29 @@ class RosRuntime:
             return CallResult(False, f"set_parameters on {node}: no answer within {timeout:g} s")
         return results[0]
 
-    def _spin(self) -> None:
+    @staticmethod
+    def _spin(executor: Any) -> None:
         from rclpy.executors import ExternalShutdownException
 
         # The context shut down under us: nothing left to do.
         with contextlib.suppress(ExternalShutdownException):
-            self.executor.spin()
+            executor.spin()
 
     def close(self) -> None:
         """Stop serving and managing; idempotent."""
         if self._closed:
             return
         self._closed = True
-        self.executor.shutdown(timeout_sec=2.0)
-        self._thread.join(3.0)
+        for executor in (self.executor, self.backend_executor):
+            executor.shutdown(timeout_sec=2.0)
+        for thread in self._threads:
+            thread.join(3.0)
         if self.server is not None:
             self.server.close()
         self.manager.close()
         self.clock.close()
         self.node.destroy_node()
+        self.backend_node.destroy_node()
         self.context.try_shutdown()
 
     def __enter__(self) -> RosRuntime:
