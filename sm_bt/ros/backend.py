@@ -12,10 +12,12 @@ What the reference manager does not do, and this backend does:
   are applied after that report, in order.
 * **Liveness.** After a crash, DDS keeps showing a node for its lease (20 s with Fast DDS), so
   discovery alone cannot tell. The nodes of one process share a DDS participant and die together:
-  one node per participant is probed (``get_state``, or ``get_parameters`` for plain nodes) every
-  ``probe_interval`` s, and its answer vouches for the others; no answer for ``liveness_timeout`` s
-  means they vanished. The graph is looked at every ``poll_interval`` s while a node is missing,
-  every ``idle_poll_interval`` s once all are present.
+  one node per participant is probed (``get_state``, or ``get_parameters`` for plain nodes)
+  ``probe_interval`` s after its last answer, and its answer vouches for the others; a probe
+  unanswered for ``liveness_timeout`` s means they vanished (so a crash is seen within
+  ``probe_interval + liveness_timeout``). The graph is looked at every ``poll_interval`` s while a
+  node is missing, every ``idle_poll_interval`` s once all are present (``graph_interval`` for the
+  services of present nodes: the costly part).
   While a call of ours is in flight the node may be busy in a long transition callback, which
   also blocks its other services: then only that call's own timeout applies. A node that leaves
   the graph cleanly is reported at once.
@@ -142,7 +144,8 @@ class RosBackend:
 
     def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
                  acquire_timeout: float = 2.0, probe_interval: float = 0.5, liveness_timeout: float = 1.5,
-                 plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 0.25) -> None:
+                 plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 1.0,
+                 graph_interval: float = 1.0) -> None:
         self._node = node
         self._model = model
         self._clock = clock if clock is not None else WallClock("sm_bt-ros-clock")
@@ -153,6 +156,8 @@ class RosBackend:
         self.plain_after = plain_after
         self.poll_interval = poll_interval
         self.idle_poll_interval = idle_poll_interval
+        self.graph_interval = graph_interval
+        self._graph_checked = -graph_interval
         self._lock = threading.Lock()
         self._peers: dict[str, _Peer] = {}
         self._by_fqn: dict[str, _Peer] = {}
@@ -332,9 +337,12 @@ class RosBackend:
                 return
             peers = list(self._peers.values())
             probed = self._share_liveness(peers)
+            graph = now - self._graph_checked >= self.graph_interval
+            if graph:
+                self._graph_checked = now
         for peer in peers:
             try:
-                self._look_at(peer, now, peer in probed)
+                self._look_at(peer, now, peer in probed, graph)
             except Exception:  # one node's trouble must not stop the others being watched
                 log.exception("watching %s failed", peer.fqn)
         with self._lock:
@@ -361,9 +369,11 @@ class RosBackend:
             probed.add(probing or next((m for m in members if not m.busy), members[0]))
         return probed
 
-    def _look_at(self, peer: _Peer, now: float, probed: bool) -> None:
-        lifecycle_ready = peer.get_state.service_is_ready()
-        parameters_ready = peer.get_parameters.service_is_ready()
+    def _look_at(self, peer: _Peer, now: float, probed: bool, graph: bool) -> None:
+        """``graph``: also ask whether a present node's services are still there."""
+        present = peer.presence is _Presence.PRESENT
+        lifecycle_ready = peer.get_state.service_is_ready() if graph or not present else True
+        parameters_ready = peer.get_parameters.service_is_ready() if graph or not present else True
         with self._lock:
             presence = peer.presence
             if presence is _Presence.PRESENT:
@@ -454,6 +464,7 @@ class RosBackend:
             events_before = peer.events
 
         def answered(response: Any) -> None:
+            self._clock.call_later(self.probe_interval, lambda: self._probe_if_due(peer))
             with self._lock:
                 peer.probe = None
                 if peer.presence is not _Presence.PRESENT or not peer.lifecycle:
@@ -472,6 +483,7 @@ class RosBackend:
         def unanswered(reason: str) -> None:
             with self._lock:
                 peer.probe = None
+            self._silence_verdict(peer)
 
         if peer.lifecycle:
             call = self._call(peer, peer.get_state, GetState.Request(), "get_state (liveness)",
@@ -482,6 +494,28 @@ class RosBackend:
         with self._lock:
             if not call.finished:
                 peer.probe = call
+
+    def _probe_if_due(self, peer: _Peer) -> None:
+        """The next probe of a chain: one ``probe_interval`` after the last answer."""
+        now = self._clock.now()
+        with self._lock:
+            due = (self._listener is not None and peer.presence is _Presence.PRESENT and peer.probe is None
+                   and now - peer.last_probe >= self.probe_interval - _SLACK)
+        if due:
+            self._probe(peer, now)
+
+    def _silence_verdict(self, peer: _Peer) -> None:
+        """A probe went unanswered: the nodes of its process not heard of since are gone."""
+        now = self._clock.now()
+        with self._lock:
+            key = peer.participant or peer.fqn
+            members = [p for p in self._peers.values()
+                       if p.presence is _Presence.PRESENT and (p.participant or p.fqn) == key]
+            heard = max((m.last_heard for m in members), default=now)
+            silent = [m for m in members if not m.busy and now - heard >= self.liveness_timeout - _SLACK]
+        for member in silent:
+            self._vanish(member, f"no answer from {member.fqn} for {self.liveness_timeout:g} s (node exited, or "
+                                 "network unreachable)")
 
     def _vanish(self, peer: _Peer, reason: str) -> None:
         with self._lock:
@@ -648,6 +682,8 @@ class RosBackend:
         """Hand a report or a ``done`` to the listener's side: the clock thread, in order."""
         self._clock.call_later(0.0, action)
 
+
+_SLACK = 1e-3  # timers fire a little early or late
 
 #: How long an echo of our own change is waited for; after that, an equal value is news again.
 ECHO_WINDOW = 5.0
