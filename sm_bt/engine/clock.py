@@ -125,7 +125,8 @@ class WallClock:
                 timer.cancelled = True
                 return timer
             heapq.heappush(self._queue, (timer.due, next(self._sequence), timer))
-            self._condition.notify()
+            if self._queue[0][2] is timer:  # only a new earliest timer changes how long to sleep
+                self._condition.notify()
         return timer
 
     def close(self, timeout: float = 2.0) -> None:

@@ -145,8 +145,12 @@ class RosBackend:
     def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
                  acquire_timeout: float = 2.0, probe_interval: float = 0.5, liveness_timeout: float = 1.5,
                  plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 1.0,
-                 graph_interval: float = 1.0) -> None:
+                 graph_interval: float = 1.0, watch_node: Node | None = None) -> None:
         self._node = node
+        # The clients of discovery and liveness (get_state, get_parameters, ...) may live on a node
+        # of their own, spun apart: the node of the calls that change nodes then wakes over fewer
+        # entities for each answer and event (see sm_bt.ros.runtime).
+        self._watch = watch_node if watch_node is not None else node
         self._model = model
         self._clock = clock if clock is not None else WallClock("sm_bt-ros-clock")
         self.call_timeout = call_timeout
@@ -195,9 +199,10 @@ class RosBackend:
             for subscription in self._subscriptions:
                 self._node.destroy_subscription(subscription)
             for peer in self._peers.values():
-                for client in (peer.change_state, peer.get_state, peer.set_parameters, peer.get_parameters,
-                               peer.list_parameters, peer.get_transitions):
+                for client in (peer.change_state, peer.set_parameters):
                     self._node.destroy_client(client)
+                for client in (peer.get_state, peer.get_parameters, peer.list_parameters, peer.get_transitions):
+                    self._watch.destroy_client(client)
             self._subscriptions.clear()
             self._peers.clear()
             self._by_fqn.clear()
@@ -303,9 +308,12 @@ class RosBackend:
                 why = result.reason or "no reason given"
                 self._dispatch(lambda: done(CallResult(False, f"set_parameters on {node} rejected: {why}")))
                 return
-            if confirmed and listener is not None:  # the answer says what the node now holds
-                self._dispatch(lambda: listener.node_parameters(peer.part, confirmed))
-            self._dispatch(lambda: done(CallResult(True)))
+            def confirm() -> None:  # the answer says what the node now holds
+                if confirmed and listener is not None:
+                    listener.node_parameters(peer.part, confirmed)
+                done(CallResult(True))
+
+            self._dispatch(confirm)
 
         def failed(reason: str) -> None:
             with self._lock:
@@ -637,15 +645,15 @@ class RosBackend:
         spec = self._model.part(part)
         if not isinstance(spec, NodePart):
             raise ValueError(f"{part} is a system of the model, not a node")
-        node = self._node
+        node, watch = self._node, self._watch
         peer = _Peer(
             part, fqn, tuple(spec.parameter_names),
             change_state=node.create_client(ChangeState, f"{fqn}/change_state"),
-            get_state=node.create_client(GetState, f"{fqn}/get_state"),
+            get_state=watch.create_client(GetState, f"{fqn}/get_state"),
             set_parameters=node.create_client(SetParametersAtomically, f"{fqn}/set_parameters_atomically"),
-            get_parameters=node.create_client(GetParameters, f"{fqn}/get_parameters"),
-            list_parameters=node.create_client(ListParameters, f"{fqn}/list_parameters"),
-            get_transitions=node.create_client(GetAvailableTransitions, f"{fqn}/get_available_transitions"),
+            get_parameters=watch.create_client(GetParameters, f"{fqn}/get_parameters"),
+            list_parameters=watch.create_client(ListParameters, f"{fqn}/list_parameters"),
+            get_transitions=watch.create_client(GetAvailableTransitions, f"{fqn}/get_available_transitions"),
         )
         self._subscriptions.append(node.create_subscription(
             TransitionEvent, f"{fqn}/transition_event", lambda message: self._on_transition_event(peer, message),

@@ -7,13 +7,15 @@
         ...tick...
 
 It owns its own rclpy context (so it never disturbs another user of rclpy in the process; its
-nodes share one DDS participant) and two nodes, each spun by its own executor thread (py_trees
+nodes share one DDS participant) and three nodes, each spun by its own executor thread (py_trees
 ticks in the caller's thread; the manager is thread-safe): ``node`` serves the reference's mode
 manager interface (:class:`~sm_bt.ros.manager_node.ModeManagerServer`), ``backend_node``
-(``<name>_backend``) talks to the managed nodes. Apart, each executor wakes over its own
-entities only: rclpy's executor rebuilds its wait set over every entity of its nodes for every
-message it handles (with 20 nodes, 1.9 ms together, 0.8 ms for the backend's alone), and the
-backend handles one per answer and event. ``close()`` stops in the order rclpy needs: executors
+(``<name>_backend``) makes the calls that change the managed nodes and hears their events, and
+``watch_node`` (``<name>_watch``) asks for their state and parameters (discovery, liveness).
+Apart, each executor wakes over its own entities only: rclpy's executor rebuilds its wait set
+over every entity of its nodes for every message it handles (with 20 managed nodes, 1.9 ms for
+all of them together, 0.8 ms for the backend's), and the backend handles one per answer and
+event. ``close()`` stops in the order rclpy needs: executors
 first, then the manager and backend, then the nodes and context.
 """
 
@@ -65,16 +67,20 @@ class RosRuntime:
         self.clock = WallClock("sm_bt-ros-clock")
         self.node = rclpy.create_node(node_name, context=self.context)
         self.backend_node = rclpy.create_node(f"{node_name}_backend", context=self.context)
+        self.watch_node = rclpy.create_node(f"{node_name}_watch", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.backend_executor = SingleThreadedExecutor(context=self.context)
         self.backend_executor.add_node(self.backend_node)
-        self._threads = [threading.Thread(target=self._spin, args=(executor,), name=name, daemon=True)
-                         for executor, name in ((self.executor, "sm_bt-ros-executor"),
-                                                (self.backend_executor, "sm_bt-ros-backend-executor"))]
+        self.watch_executor = SingleThreadedExecutor(context=self.context)
+        self.watch_executor.add_node(self.watch_node)
+        self._executors = (self.executor, self.backend_executor, self.watch_executor)
+        self._threads = [threading.Thread(target=self._spin, args=(executor,), name=f"sm_bt-ros-{name}", daemon=True)
+                         for executor, name in zip(self._executors, ("executor", "backend", "watch"), strict=True)]
         for thread in self._threads:
             thread.start()
-        self.backend = RosBackend(self.backend_node, model, clock=self.clock, **dict(backend_options or {}))
+        self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node,
+                                  **dict(backend_options or {}))
         self.manager = ModeManager(model, self.backend, **dict(manager_options or {}))
         self.server = ModeManagerServer(self.node, self.manager) if serve else None
         self._closed = False
@@ -108,7 +114,7 @@ class RosRuntime:
         if self._closed:
             return
         self._closed = True
-        for executor in (self.executor, self.backend_executor):
+        for executor in self._executors:
             executor.shutdown(timeout_sec=2.0)
         for thread in self._threads:
             thread.join(3.0)
@@ -118,6 +124,7 @@ class RosRuntime:
         self.clock.close()
         self.node.destroy_node()
         self.backend_node.destroy_node()
+        self.watch_node.destroy_node()
         self.context.try_shutdown()
 
     def __enter__(self) -> RosRuntime:
