@@ -7,7 +7,8 @@ usage error. Progress goes to stderr; stdout is the table (markdown, as in the R
 from __future__ import annotations
 
 import argparse
-import importlib
+import json
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -22,6 +23,27 @@ MODULES = ("scale", "memory", "model_load", "tick", "ros")
 def _one_line(error: BaseException) -> str:
     text = str(error).strip().splitlines()
     return f"{type(error).__name__}: {text[0] if text else ''}".rstrip(": ")
+
+
+class ModuleFailed(RuntimeError):
+    """A benchmark module's process failed; the message is its last line of stderr."""
+
+
+def _run_module(name: str, quick: bool) -> list[Figure]:
+    """Run ``bench.<name>`` in a fresh interpreter (see :mod:`bench.one`)."""
+    if name not in MODULES:
+        raise LookupError(f"no benchmark module {name!r} (modules: {', '.join(MODULES)})")
+    command = [sys.executable, "-m", "bench.one", name, *(["--quick"] if quick else [])]
+    done = subprocess.run(command, cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True,
+                          timeout=1800, check=False)
+    if done.returncode != 0:
+        lines = [line for line in done.stderr.strip().splitlines() if line.strip()]
+        raise ModuleFailed(lines[-1] if lines else f"exit status {done.returncode}")
+    figures = []
+    for item in json.loads(done.stdout.strip().splitlines()[-1]):
+        item.pop("met", None)
+        figures.append(Figure(**item))
+    return figures
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -42,10 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench: {name} ...", file=sys.stderr, flush=True)
         began = time.monotonic()
         try:
-            if name not in MODULES:
-                raise LookupError(f"no benchmark module {name!r} (modules: {', '.join(MODULES)})")
-            module = importlib.import_module(f"bench.{name}")
-            got = module.run(args.quick)
+            got = _run_module(name, args.quick)
         except Exception as error:  # one broken benchmark must not hide the others' figures
             failures.append((name, _one_line(error)))
             print(f"bench: {name} failed: {_one_line(error)}", file=sys.stderr, flush=True)

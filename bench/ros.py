@@ -19,6 +19,8 @@ and a plain rclpy client of its own (another context, node and executor): the fl
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import signal
 import statistics
@@ -90,6 +92,42 @@ class _Floor:
         self._thread = threading.Thread(target=self.executor.spin, daemon=True, name="bench-floor")
         self._thread.start()
 
+    def switch_events(self, count: int, mode: str) -> tuple[float, float]:
+        """Wait for a switch's events: when the last node's (of ``count``) parameter event came,
+        and the system's ``mode_event`` for ``mode``."""
+        def published() -> bool:
+            return len({n for _, n in self.parameter_events}) >= count and any(
+                m == mode for _, m in self.mode_events)
+
+        try:
+            _wait(published, "events of the switch", 5.0)
+        except RuntimeError:
+            raise RuntimeError(f"events of the switch to {mode}: parameter events from "
+                               f"{sorted({n for _, n in self.parameter_events})}, mode events "
+                               f"{[m for _, m in self.mode_events]}") from None
+        last_node_event = max(t for t, _ in self.parameter_events[:count])  # one message per atomic set
+        return last_node_event, min(t for t, m in self.mode_events if m == mode)
+
+    def serve(self, values: dict[str, dict[str, dict[str, Any]]]) -> None:
+        """Answer the parent's commands, one per line on stdin, one line each on stdout."""
+        print("READY", flush=True)
+        for line in sys.stdin:
+            command, _, argument = line.strip().partition(" ")
+            if command == "transition":
+                answer: object = self.transition(argument)
+            elif command == "parameters":
+                answer = self.parameters(values[argument])
+            elif command == "clear":
+                self.parameter_events.clear()
+                self.mode_events.clear()
+                answer = 0
+            elif command == "switch_events":
+                count, mode = argument.split(" ", 1)
+                answer = self.switch_events(int(count), mode)
+            else:
+                break
+            print(json.dumps(answer), flush=True)
+
     def _on_parameters(self, message: Any) -> None:
         self.parameter_events.append((time.perf_counter(), message.node))
 
@@ -149,6 +187,65 @@ class _Floor:
         self.node.destroy_node()
         self.context.try_shutdown()
         self._thread.join(2.0)
+
+
+class _FloorProcess:
+    """The floor in a process of its own (``python -m bench.ros PATH``), so that its executor and
+    its event handling do not compete with the manager for this interpreter. Its times are
+    ``perf_counter`` (CLOCK_MONOTONIC: the same clock in both processes)."""
+
+    def __init__(self, path: Path, nodes: Sequence[str]) -> None:
+        self.nodes = list(nodes)
+        self.process = subprocess.Popen([sys.executable, "-m", "bench.ros", str(path)],
+                                        cwd=Path(__file__).resolve().parents[1], stdin=subprocess.PIPE,
+                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        if self._line() != "READY":
+            raise RuntimeError(f"the floor process did not start: {self._stderr()}")
+
+    def _line(self) -> str:
+        assert self.process.stdout is not None
+        return self.process.stdout.readline().strip()
+
+    def _stderr(self) -> str:
+        self.process.kill()
+        return (self.process.communicate(timeout=5)[1] or "").strip()[-500:]
+
+    def _ask(self, command: str) -> Any:
+        assert self.process.stdin is not None
+        self.process.stdin.write(command + "\n")
+        self.process.stdin.flush()
+        line = self._line()
+        if not line:
+            raise RuntimeError(f"floor process failed on {command!r}: {self._stderr()}")
+        return json.loads(line)
+
+    def transition(self, label: str) -> float:
+        return float(self._ask(f"transition {label}"))
+
+    def parameters(self, mode: str) -> float:
+        return float(self._ask(f"parameters {mode}"))
+
+    def clear(self) -> None:
+        self._ask("clear")
+
+    def switch_events(self, count: int, mode: str) -> tuple[float, float]:
+        last, system = self._ask(f"switch_events {count} {mode}")
+        return float(last), float(system)
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError, ValueError):
+            assert self.process.stdin is not None
+            self.process.stdin.write("quit\n")
+            self.process.stdin.close()
+        try:
+            self.process.wait(5.0)
+        except subprocess.TimeoutExpired:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(3.0)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(3.0)
 
 
 def _node_values(model: Model, node: str, mode: str) -> dict[str, Any]:
@@ -223,11 +320,10 @@ def run(quick: bool) -> list[Figure]:
         names = [f"bench_n{i}" for i in range(count)]
         values = {mode: {n: _node_values(model, n, mode) for n in names} for mode in ("__DEFAULT__", "FAST")}
         process = NodesProcess(str(path), "--state", "unconfigured").start()
-        floor: _Floor | None = None
+        floor: _FloorProcess | None = None
         runtime: Any = None
         try:
-            floor = _Floor(names)
-            floor.ready()
+            floor = _FloorProcess(path, names)
             runtime = RosRuntime(model, manager_options={"rules": False, "recovery": False})
             manager = runtime.manager
             _wait(lambda: all(manager.observation(n).reachable for n in names), "the manager sees every node")
@@ -248,7 +344,7 @@ def run(quick: bool) -> list[Figure]:
     return figures
 
 
-def _p1_p2(floor: _Floor, manager: ModeManager, values: dict[str, dict[str, dict[str, Any]]], repeats: int,
+def _p1_p2(floor: _FloorProcess, manager: ModeManager, values: dict[str, dict[str, dict[str, Any]]], repeats: int,
            count: int) -> list[Figure]:
     times: dict[str, list[float]] = {key: [] for key in ("switch", "switch_floor", "two", "one", "bring_floor")}
     delays: list[float] = []
@@ -280,25 +376,13 @@ def _p1_p2(floor: _Floor, manager: ModeManager, values: dict[str, dict[str, dict
         if _ != repeats - 1:
             reset()
     def manager_to(mode: str) -> None:
-        floor.parameter_events.clear()
-        floor.mode_events.clear()
+        floor.clear()
         times["switch"].append(_confirmed(manager, lambda: manager.change_mode(SYSTEM, mode)))
-
-        def published() -> bool:
-            return len({n for _, n in floor.parameter_events}) >= count and any(
-                m == mode for _, m in floor.mode_events)
-
-        try:
-            _wait(published, "events of the switch", 5.0)
-        except RuntimeError:
-            raise RuntimeError(f"events of the switch to {mode}: parameter events from "
-                               f"{sorted({n for _, n in floor.parameter_events})}, mode events "
-                               f"{[m for _, m in floor.mode_events]}, {SYSTEM} {manager.actual(SYSTEM)}") from None
-        last_node_event = max(t for t, _ in floor.parameter_events[:count])  # one message per atomic set
-        delays.append(min(t for t, m in floor.mode_events if m == mode) - last_node_event)
+        last_node_event, system_event = floor.switch_events(count, mode)
+        delays.append(system_event - last_node_event)
 
     def floor_to(mode: str) -> None:
-        times["switch_floor"].append(floor.parameters(values[mode]))
+        times["switch_floor"].append(floor.parameters(mode))
         _wait(lambda: all(manager.observation(n).parameters == values[mode][n] for n in floor.nodes),
               "manager sees the floor's values")
 
@@ -327,3 +411,23 @@ def _p1_p2(floor: _Floor, manager: ModeManager, values: dict[str, dict[str, dict
     figures.append(Figure("P2", "system mode_event after the last node event, max", max(delays_ms), "ms",
                           P2_GOAL_MS, details={"samples": len(delays)}))
     return figures
+
+
+def _floor_main(path: str) -> int:
+    """The floor's process: ``python -m bench.ros MODEL`` (see :class:`_FloorProcess`)."""
+    from sm_bt.model.loader import load_model
+
+    model = load_model(path)
+    names = [part.name for part in model.nodes]
+    values = {mode: {n: _node_values(model, n, mode) for n in names} for mode in ("__DEFAULT__", "FAST")}
+    floor = _Floor(names)
+    try:
+        floor.ready()
+        floor.serve(values)
+    finally:
+        floor.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_floor_main(sys.argv[1]))
