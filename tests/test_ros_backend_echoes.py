@@ -13,7 +13,7 @@ import threading
 from sm_bt.engine.clock import VirtualClock
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State
-from sm_bt.ros.backend import ECHO_WINDOW, RosBackend, _echo, _Peer, _Presence, _SetInFlight
+from sm_bt.ros.backend import ECHO_WINDOW, RosBackend, _echo, _Outbox, _Peer, _Presence, _SetInFlight
 
 
 class _Listener:
@@ -31,6 +31,7 @@ def _backend() -> tuple[RosBackend, _Peer, _Listener, VirtualClock]:
     backend._clock = clock  # type: ignore[assignment]
     backend._listener = listener  # type: ignore[assignment]
     backend._lock = threading.Lock()
+    backend._outbox = _Outbox(clock)
     peer = _Peer("amcl", "/amcl", ("alpha",), None, None, None, None, None, None, presence=_Presence.PRESENT,
                  state=State.INACTIVE)
     return backend, peer, listener, clock
@@ -91,3 +92,22 @@ def test_a_confirmed_transition_is_reported_once_and_its_events_are_not() -> Non
     assert [state for state, _ in peer.state_echoes] == [State.ACTIVE]  # only the goal's event is to come
     assert _echo(peer.state_echoes, State.ACTIVE, clock.now())
     assert not _echo(peer.state_echoes, State.ACTIVATING, clock.now())  # anything later is news
+
+
+def test_the_outbox_runs_a_burst_in_order_in_one_clock_callback_and_survives_a_bad_action() -> None:
+    clock = VirtualClock()
+    outbox = _Outbox(clock)
+    ran: list[int] = []
+
+    def bad() -> None:
+        raise RuntimeError("a listener bug")
+
+    for action in (lambda: ran.append(1), bad, lambda: ran.append(2)):
+        outbox.put(action)
+    assert len(clock._queue) == 1 and ran == []  # one wake for the burst, nothing run inline
+    clock.run_pending()
+    assert ran == [1, 2]
+    outbox.put(lambda: ran.append(3))  # a later action schedules a new callback
+    assert ran == [1, 2]
+    clock.run_pending()
+    assert ran == [1, 2, 3]

@@ -52,7 +52,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_parameter_events
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
-from sm_bt.engine.clock import TimerHandle, WallClock
+from sm_bt.engine.clock import Clock, TimerHandle, WallClock
 from sm_bt.engine.lifecycle import REQUESTABLE, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
@@ -163,6 +163,7 @@ class RosBackend:
         self.graph_interval = graph_interval
         self._graph_checked = -graph_interval
         self._lock = threading.Lock()
+        self._outbox = _Outbox(self._clock)
         self._peers: dict[str, _Peer] = {}
         self._by_fqn: dict[str, _Peer] = {}
         self._listener: BackendListener | None = None
@@ -688,7 +689,38 @@ class RosBackend:
 
     def _dispatch(self, action: Callable[[], None]) -> None:
         """Hand a report or a ``done`` to the listener's side: the clock thread, in order."""
-        self._clock.call_later(0.0, action)
+        self._outbox.put(action)
+
+
+class _Outbox:
+    """Actions for the clock thread, run in order. Answers and events come in bursts (one per node
+    of a change): one clock callback runs every action waiting, not a timer and a wake for each."""
+
+    def __init__(self, clock: Clock) -> None:
+        self._clock = clock
+        self._actions: collections.deque[Callable[[], None]] = collections.deque()
+        self._lock = threading.Lock()
+        self._draining = False
+
+    def put(self, action: Callable[[], None]) -> None:
+        with self._lock:
+            self._actions.append(action)
+            if self._draining:
+                return
+            self._draining = True
+        self._clock.call_later(0.0, self._drain)
+
+    def _drain(self) -> None:
+        while True:
+            with self._lock:
+                if not self._actions:
+                    self._draining = False
+                    return
+                action = self._actions.popleft()
+            try:
+                action()
+            except Exception:  # one bad report must not hold back the others
+                log.exception("backend report %r failed", action)
 
 
 _SLACK = 1e-3  # timers fire a little early or late

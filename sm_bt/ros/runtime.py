@@ -66,8 +66,11 @@ class RosRuntime:
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.clock = WallClock("sm_bt-ros-clock")
         self.node = rclpy.create_node(node_name, context=self.context)
-        self.backend_node = rclpy.create_node(f"{node_name}_backend", context=self.context)
-        self.watch_node = rclpy.create_node(f"{node_name}_watch", context=self.context)
+        # The helper nodes have no parameters: without parameter services they wake over fewer entities.
+        self.backend_node = rclpy.create_node(f"{node_name}_backend", context=self.context,
+                                              start_parameter_services=False)
+        self.watch_node = rclpy.create_node(f"{node_name}_watch", context=self.context,
+                                            start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.backend_executor = SingleThreadedExecutor(context=self.context)
