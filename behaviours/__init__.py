@@ -1,7 +1,8 @@
 """Mode behaviours for py_trees (installed as ``sm_bt.behaviours``).
 
-Every behaviour finds the embedded :class:`~sm_bt.ModeManager` through
-``tree.setup(manager=manager)`` and never blocks a tick:
+Every behaviour finds the embedded :class:`~sm_bt.ModeManager` through its own ``manager=``,
+:func:`attach_manager` on its tree or subtree, or ``tree.setup(manager=manager)``, and never
+blocks a tick:
 
 * :class:`ChangeMode`, :class:`ChangeState`: request a change, RUNNING until confirmed
 * :class:`ModeIs`, :class:`StateIs`: checks (SUCCESS/FAILURE in one tick)
@@ -10,6 +11,7 @@ Every behaviour finds the embedded :class:`~sm_bt.ModeManager` through
 * :class:`ModesToBlackboard`: every part's state and mode under ``/system_modes``
 * :class:`Reconfigure`: let a :class:`~sm_bt.reasoner.Reasoner` pick and request the mode
 * idioms: :func:`hold_mode` (context switch), :func:`switch_on_divergence` (rule in the tree)
+* :class:`FeedbackSnapshotVisitor`: snapshots flagged changed on a new step of a change too
 """
 
 from sm_bt.behaviours.blackboard import ModesToBlackboard, PartStatus
@@ -17,13 +19,15 @@ from sm_bt.behaviours.change import TRANSITIONS, ChangeMode, ChangeState
 from sm_bt.behaviours.checks import ModeIs, StateIs, WaitForMode, WaitForState
 from sm_bt.behaviours.divergence import OnDivergence
 from sm_bt.behaviours.idioms import HoldMode, hold_mode, switch_on_divergence
-from sm_bt.behaviours.manager_access import ManagerBehaviour, NotSetUp
+from sm_bt.behaviours.manager_access import ManagerBehaviour, NotSetUp, attach_manager
 from sm_bt.behaviours.reconfigure import Reconfigure
+from sm_bt.behaviours.visitors import FeedbackSnapshotVisitor
 
 __all__ = [
     "TRANSITIONS",
     "ChangeMode",
     "ChangeState",
+    "FeedbackSnapshotVisitor",
     "HoldMode",
     "ManagerBehaviour",
     "ModeIs",
@@ -35,6 +39,7 @@ __all__ = [
     "StateIs",
     "WaitForMode",
     "WaitForState",
+    "attach_manager",
     "hold_mode",
     "switch_on_divergence",
 ]

@@ -7,9 +7,11 @@ interruption withdraws it.
 
 from __future__ import annotations
 
+from typing import Any
+
 from py_trees.common import Status
 
-from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name
+from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name, seconds
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
@@ -18,15 +20,14 @@ from sm_bt.engine.requests import Request
 TRANSITIONS = REQUESTABLE_LABELS
 
 
-class _RequestBehaviour(ManagerBehaviour):
+class _RequestBehaviour(ManagerBehaviour, register=False):
     """Common life of a behaviour that owns one manager request."""
 
-    def __init__(self, name: str, part: str, timeout: float | None) -> None:
-        super().__init__(name)
-        if timeout is not None and timeout <= 0:
-            raise ValueError(f"{name}: timeout must be positive, not {timeout}")
+    def __init__(self, name: str, part: str, timeout: float | None, *, manager: ModeManager | None = None,
+                 **kwargs: Any) -> None:
+        super().__init__(name, manager=manager, **kwargs)
         self.part = part
-        self.timeout = timeout
+        self.timeout = seconds(name, timeout)
         self.request: Request | None = None
 
     def _make_request(self, manager: ModeManager) -> Request | None:
@@ -74,10 +75,15 @@ class ChangeMode(_RequestBehaviour):
     manager's ``request_timeout``. An unknown part or mode is an error at ``setup``.
     """
 
-    def __init__(self, name: str, part: str, mode: str, timeout: float | None = None) -> None:
-        super().__init__(name, part, timeout)
+    def __init__(self, name: str, part: str, mode: str, timeout: float | None = None, *,
+                 manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, part, timeout, manager=manager, **kwargs)
         require_mode_name(name, part, mode)
         self.mode = mode
+
+    @property
+    def detail(self) -> str:
+        return f"{self.part} {self.mode}"
 
     def validate(self, manager: ModeManager) -> None:
         self._check_mode(manager, self.part, self.mode)
@@ -98,12 +104,17 @@ class ChangeState(_RequestBehaviour):
     * ``terminate``: withdraw the request when interrupted while RUNNING
     """
 
-    def __init__(self, name: str, part: str, transition: str | Transition, timeout: float | None = None) -> None:
-        super().__init__(name, part, timeout)
+    def __init__(self, name: str, part: str, transition: str | Transition, timeout: float | None = None, *,
+                 manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, part, timeout, manager=manager, **kwargs)
         label = transition.label if isinstance(transition, Transition) else transition
         if label not in TRANSITIONS:
             raise ValueError(f"{name}: cannot request transition {label!r} (one of: {', '.join(TRANSITIONS)})")
         self.transition = label
+
+    @property
+    def detail(self) -> str:
+        return f"{self.part} {self.transition}"
 
     def validate(self, manager: ModeManager) -> None:
         self._check_part(manager, self.part)

@@ -8,9 +8,11 @@ they see what the nodes report, not what was asked for.
 
 from __future__ import annotations
 
+from typing import Any
+
 from py_trees.common import Status
 
-from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name
+from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name, seconds
 from sm_bt.engine.inference import Actual
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.states import State
@@ -55,13 +57,18 @@ class _InState(_Predicate):
         return self.state.label
 
 
-class _PartCondition(ManagerBehaviour):
+class _PartCondition(ManagerBehaviour, register=False):
     """A condition on ``manager.actual(part)``."""
 
-    def __init__(self, name: str, part: str, expected: _Predicate) -> None:
-        super().__init__(name)
+    def __init__(self, name: str, part: str, expected: _Predicate, *, manager: ModeManager | None = None,
+                 **kwargs: Any) -> None:
+        super().__init__(name, manager=manager, **kwargs)
         self.part = part
         self.expected = expected
+
+    @property
+    def detail(self) -> str:
+        return f"{self.part} {self.expected}"
 
     def validate(self, manager: ModeManager) -> None:
         self._check_part(manager, self.part)
@@ -75,18 +82,17 @@ class _PartCondition(ManagerBehaviour):
         return ok
 
 
-class _Check(_PartCondition):
+class _Check(_PartCondition, register=False):
     def update(self) -> Status:
         """SUCCESS if the part is there now, FAILURE otherwise (feedback: what it is)."""
         return Status.SUCCESS if self._check() else Status.FAILURE
 
 
-class _Wait(_PartCondition):
-    def __init__(self, name: str, part: str, expected: _Predicate, timeout: float | None) -> None:
-        super().__init__(name, part, expected)
-        if timeout is not None and timeout <= 0:
-            raise ValueError(f"{name}: timeout must be positive, not {timeout}")
-        self.timeout = timeout
+class _Wait(_PartCondition, register=False):
+    def __init__(self, name: str, part: str, expected: _Predicate, timeout: float | None, *,
+                 manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, part, expected, manager=manager, **kwargs)
+        self.timeout = seconds(name, timeout)
         self._started = 0.0
 
     def initialise(self) -> None:
@@ -112,17 +118,19 @@ class ModeIs(_Check):
     error at ``setup``.
     """
 
-    def __init__(self, name: str, part: str, mode: str) -> None:
+    def __init__(self, name: str, part: str, mode: str, *, manager: ModeManager | None = None,
+                 **kwargs: Any) -> None:
         require_mode_name(name, part, mode)
-        super().__init__(name, part, _InMode(mode))
+        super().__init__(name, part, _InMode(mode), manager=manager, **kwargs)
 
 
 class StateIs(_Check):
     """Is ``part`` in lifecycle ``state`` (``"inactive"``, ``State.ACTIVE``, ...) now? SUCCESS or
     FAILURE in one tick, never RUNNING."""
 
-    def __init__(self, name: str, part: str, state: State | str) -> None:
-        super().__init__(name, part, _InState(state))
+    def __init__(self, name: str, part: str, state: State | str, *, manager: ModeManager | None = None,
+                 **kwargs: Any) -> None:
+        super().__init__(name, part, _InState(state), manager=manager, **kwargs)
 
 
 class WaitForMode(_Wait):
@@ -131,14 +139,16 @@ class WaitForMode(_Wait):
     expires first. It only watches: nothing is requested. Without a timeout it waits for as long
     as it takes: give one unless something else bounds the wait."""
 
-    def __init__(self, name: str, part: str, mode: str, timeout: float | None = None) -> None:
+    def __init__(self, name: str, part: str, mode: str, timeout: float | None = None, *,
+                 manager: ModeManager | None = None, **kwargs: Any) -> None:
         require_mode_name(name, part, mode)
-        super().__init__(name, part, _InMode(mode), timeout)
+        super().__init__(name, part, _InMode(mode), timeout, manager=manager, **kwargs)
 
 
 class WaitForState(_Wait):
     """Wait until ``part`` is in lifecycle ``state``: RUNNING until then, SUCCESS when it is;
     FAILURE when the optional ``timeout`` expires first (without one, it waits without bound)."""
 
-    def __init__(self, name: str, part: str, state: State | str, timeout: float | None = None) -> None:
-        super().__init__(name, part, _InState(state), timeout)
+    def __init__(self, name: str, part: str, state: State | str, timeout: float | None = None, *,
+                 manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, part, _InState(state), timeout, manager=manager, **kwargs)

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import py_trees
 from py_trees.common import Status
+from py_trees.ports import PortInformation
 
-from sm_bt.behaviours.manager_access import ManagerBehaviour
+from sm_bt.behaviours.manager_access import ManagerBehaviour, flag
+from sm_bt.engine.events import Divergence
 from sm_bt.engine.manager import ModeManager
 
 
@@ -20,18 +24,40 @@ class OnDivergence(ManagerBehaviour):
     ``since`` on the manager's clock, ``cause``) is written to the blackboard under
     ``variable_name`` for the recovery subtree to read; with ``part=None`` it is the lowest
     diverging part (a node before its systems: the likely cause). On FAILURE the variable is
-    removed, so a stale divergence is never read. ``errors_only=False`` also fires on transient
-    divergences (a request in flight, the grace period).
+    removed, so a stale divergence is never read. The key is written or removed only when its
+    value changes (activity views show changes, not every tick). ``errors_only=False`` also
+    fires on transient divergences (a request in flight, the grace period).
+
+    In XML the output is the ``divergence`` port: ``<OnDivergence part="pilot" divergence="{fault}"/>``.
     """
 
+    OUTPUT_PORTS = {  # noqa: RUF012 (py_trees' read-only class declaration)
+        "divergence": PortInformation(Divergence, required=False,
+                                      description="the divergence found (unset when there is none)"),
+    }
+
     def __init__(self, name: str, part: str | None = None, variable_name: str = "divergence",
-                 errors_only: bool = True) -> None:
-        super().__init__(name)
+                 errors_only: bool = True, *, manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, manager=manager, **kwargs)
         self.part = part
         self.variable_name = variable_name
-        self.errors_only = errors_only
+        self.errors_only = flag(name, errors_only, "errors_only")
         self.blackboard = self.attach_blackboard_client(name)
         self.blackboard.register_key(variable_name, access=py_trees.common.Access.WRITE)
+        self._written: Divergence | None = None
+
+    WIRED_PORTS = frozenset({"divergence"})
+
+    def wire_port(self, port: str, key: str) -> None:
+        """The ``divergence`` port (XML) takes the place of ``variable_name``."""
+        self.blackboards.remove(self.blackboard)
+        self.blackboard = self.attach_blackboard_client(self.name)
+        self.variable_name = port
+        self.blackboard.register_key(port, access=py_trees.common.Access.WRITE, remap_to=key)
+
+    @property
+    def detail(self) -> str:
+        return self.part or "any part"
 
     def validate(self, manager: ModeManager) -> None:
         if self.part is not None:
@@ -43,11 +69,15 @@ class OnDivergence(ManagerBehaviour):
         if self.part is not None:
             found = [d for d in found if d.part == self.part]
         if not found:
-            self.blackboard.unset(self.variable_name)
+            if self._written is not None or self.blackboard.exists(self.variable_name):
+                self.blackboard.unset(self.variable_name)
+            self._written = None
             self.feedback_message = f"{self.part or 'every part'} on target"
             return Status.FAILURE
         divergence = found[0]
-        self.blackboard.set(self.variable_name, divergence)
+        if divergence != self._written:
+            self.blackboard.set(self.variable_name, divergence)
+            self._written = divergence
         since = self.manager.clock.now() - divergence.since
         more = f" (+{len(found) - 1} more)" if len(found) > 1 else ""
         self.feedback_message = f"{divergence} for {since:.1f} s{more}"

@@ -6,13 +6,14 @@ py_trees idioms are functions that return a subtree; these two follow that style
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import py_trees
 from py_trees.common import Status
 
 from sm_bt.behaviours.change import ChangeMode
 from sm_bt.behaviours.divergence import OnDivergence
-from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name
+from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name, seconds
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
@@ -20,7 +21,7 @@ from sm_bt.model.states import State, StateMode
 log = logging.getLogger("sm_bt.behaviours")
 
 
-class HoldMode(ManagerBehaviour):
+class HoldMode(ManagerBehaviour, register=False):
     """A context switch (py_trees' context-switching pattern): puts ``part`` in ``mode`` and
     puts it back when it stops, whatever the reason.
 
@@ -34,16 +35,21 @@ class HoldMode(ManagerBehaviour):
     Use it through :func:`hold_mode`, which runs it in a parallel next to the work.
     """
 
-    def __init__(self, name: str, part: str, mode: str, timeout: float | None = None) -> None:
-        super().__init__(name)
+    def __init__(self, name: str, part: str, mode: str, timeout: float | None = None, *,
+                 manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, manager=manager, **kwargs)
         require_mode_name(name, part, mode)
         self.part = part
         self.mode = mode
-        self.timeout = timeout
+        self.timeout = seconds(name, timeout)
         self.request: Request | None = None
         self.restore_request: Request | None = None
         self._held: StateMode | None = None
         self._previous: StateMode | None = None
+
+    @property
+    def detail(self) -> str:
+        return f"{self.part} {self.mode}"
 
     def validate(self, manager: ModeManager) -> None:
         self._held = StateMode(State.ACTIVE, self._check_mode(manager, self.part, self.mode))
@@ -103,7 +109,7 @@ def _report_restore(request: Request) -> None:
         log.warning("could not restore (%s): %s", request.description, request.reason)
 
 
-class HeldModeReady(ManagerBehaviour):
+class HeldModeReady(ManagerBehaviour, register=False):
     """The gate of :func:`hold_mode`'s work: has ``hold`` put its part in the mode?
 
     * ``update``: RUNNING while the hold's request is in progress (bounded by that request's
@@ -112,9 +118,13 @@ class HeldModeReady(ManagerBehaviour):
       for the mode to come back: that wait would have no bound)
     """
 
-    def __init__(self, name: str, hold: HoldMode) -> None:
-        super().__init__(name)
+    def __init__(self, name: str, hold: HoldMode, *, manager: ModeManager | None = None) -> None:
+        super().__init__(name, manager=manager)
         self.hold = hold
+
+    @property
+    def detail(self) -> str:
+        return self.hold.detail
 
     def validate(self, manager: ModeManager) -> None:
         self._check_mode(manager, self.hold.part, self.hold.mode)
@@ -149,9 +159,10 @@ def hold_mode(name: str, part: str, mode: str, child: py_trees.behaviour.Behavio
     the subtree has the child's result, and it fails if the mode cannot be reached (within
     ``timeout``, or the manager's ``request_timeout``) or is lost before the child starts.
     """
-    hold = HoldMode(f"Hold {part} in {mode}", part, mode, timeout=timeout)
-    work = py_trees.composites.Sequence(f"{name}: work", memory=True, children=[
-        HeldModeReady(f"In {mode}?", hold),
+    # Names lead with the mode (viewers cut long names short) and hold no ':' (dot reads a port).
+    hold = HoldMode(f"Hold {mode}", part, mode, timeout=timeout)
+    work = py_trees.composites.Sequence(f"{mode} work", memory=True, children=[
+        HeldModeReady(f"{mode} reached?", hold),
         child,
     ])
     return py_trees.composites.Parallel(name, policy=py_trees.common.ParallelPolicy.SuccessOnOne(), children=[
@@ -172,6 +183,6 @@ def switch_on_divergence(name: str, part: str | None, system: str, mode: str,
     """
     watched = part or "any part"
     return py_trees.composites.Sequence(name, memory=True, children=[
-        OnDivergence(f"{watched} diverges?", part),
-        ChangeMode(f"Switch to {mode}", system, mode, timeout=timeout),
+        OnDivergence(f"{watched} diverged?", part),
+        ChangeMode(f"{mode} on divergence", system, mode, timeout=timeout),
     ])

@@ -1,27 +1,70 @@
-"""How behaviours reach the embedded mode manager: ``tree.setup(manager=...)``.
+"""How behaviours reach the embedded mode manager.
 
-py_trees hands runtime objects to behaviours through ``setup(**kwargs)``; every sm_bt behaviour
-takes the manager from there and checks the part (and mode) it was built for against the
-manager's model, so a typo fails at set-up with the part's real names, not at the first tick.
+Three ways, the first that applies wins:
+
+1. ``ChangeMode(..., manager=manager)``: the behaviour's own (for a tree of several managers);
+2. :func:`attach_manager` ``(root, manager)``: every sm_bt behaviour under ``root``, including
+   the ones inserted there later while the tree runs (found through their parents);
+3. ``tree.setup(manager=manager)``: py_trees' way of handing runtime objects to ``setup``.
+
+The first two also work where ``setup`` gets no keyword arguments (``setup_with_descendants()``,
+py_trees_ros before 2.3). Once it has its manager, a behaviour checks the part (and mode) it was
+built for against the manager's model, so a typo fails at set-up with the part's real names, not
+at the first tick.
 """
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import py_trees
+from py_trees.ports import PortInformation, PortsMixin
 
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import DEFAULT_MODE
 
 
 class NotSetUp(RuntimeError):
-    """A behaviour was ticked without a manager (``tree.setup(manager=...)`` was not called)."""
+    """A behaviour needed its mode manager and none was given (see the module's three ways)."""
 
 
 def _hint(behaviour: py_trees.behaviour.Behaviour) -> str:
-    return (f"{behaviour.qualified_name}: no mode manager; set the tree up with "
-            "tree.setup(manager=ModeManager(model, backend))")
+    return (f"{behaviour.qualified_name}: no mode manager; give it one: "
+            "sm_bt.behaviours.attach_manager(root, manager) on its tree or subtree, "
+            "tree.setup(manager=manager), or the behaviour's manager= argument")
+
+
+#: Managers attached to subtrees, by the subtree's root (kept only while the root lives).
+_attached: weakref.WeakKeyDictionary[py_trees.behaviour.Behaviour, ModeManager] = weakref.WeakKeyDictionary()
+
+
+def _require_manager(owner: str, manager: object) -> ModeManager:
+    if not isinstance(manager, ModeManager):
+        raise TypeError(f"{owner}: manager= must be a ModeManager, not {type(manager).__name__}")
+    return manager
+
+
+def attach_manager(root: py_trees.behaviour.Behaviour, manager: ModeManager) -> py_trees.behaviour.Behaviour:
+    """Make ``manager`` the mode manager of every sm_bt behaviour under ``root`` (``root``
+    included), now and for subtrees inserted under it later; returns ``root``.
+
+    Behaviours given their own ``manager=`` keep it; a manager attached to a deeper subtree
+    wins for that subtree. Parts and modes are checked when each behaviour is set up (or, if it
+    never is, first ticked)."""
+    _attached[root] = _require_manager(f"attach_manager({root.name!r})", manager)
+    return root
+
+
+def attached_manager(behaviour: py_trees.behaviour.Behaviour) -> ModeManager | None:
+    """The manager attached to ``behaviour`` or its nearest ancestor, if any."""
+    node: py_trees.behaviour.Behaviour | None = behaviour
+    while node is not None:
+        manager = _attached.get(node)
+        if manager is not None:
+            return manager
+        node = node.parent
+    return None
 
 
 def require_mode_name(behaviour: str, part: str, mode: str) -> None:
@@ -31,31 +74,106 @@ def require_mode_name(behaviour: str, part: str, mode: str) -> None:
                          "for the default mode)")
 
 
-class ManagerBehaviour(py_trees.behaviour.Behaviour):
+def seconds(owner: str, value: float | str | None, what: str = "timeout") -> float | None:
+    """``value`` as positive seconds (``None`` stays ``None``); XML gives text, so ``"10"`` is
+    10.0. ``ValueError`` naming ``owner`` for anything else."""
+    if value is None:
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{owner}: {what} must be a number of seconds, not {value!r}") from None
+    if not number > 0 or number == float("inf"):
+        raise ValueError(f"{owner}: {what} must be positive, not {value}")
+    return number
+
+
+def flag(owner: str, value: bool | str, what: str) -> bool:
+    """``value`` as a bool; XML gives ``"true"``/``"false"``."""
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("true", "1", "yes"):
+        return True
+    if text in ("false", "0", "no"):
+        return False
+    raise ValueError(f"{owner}: {what} must be true or false, not {value!r}")
+
+
+class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False):
     """A behaviour that works through a :class:`ModeManager`.
 
-    ``setup(manager=...)`` stores the manager and validates the behaviour's configuration (see
-    :meth:`validate`); it raises :class:`NotSetUp` when no manager is given and ``ValueError``
-    for a part or mode the model does not have.
+    ``manager`` (optional) is the behaviour's own; otherwise :func:`attach_manager` on an
+    ancestor, otherwise ``setup(manager=...)``. ``setup`` finds the manager and validates the
+    behaviour's configuration (see :meth:`validate`): it raises :class:`NotSetUp` when there is
+    no manager and ``ValueError`` for a part or mode the model does not have. A behaviour that
+    was never set up (a subtree inserted at run time) does the same when it first needs the
+    manager.
+
+    Every sm_bt behaviour is a py_trees ports node (:class:`~py_trees.ports.PortsMixin`), so
+    py_trees' XML parser builds it by its class name; ``kwargs`` go to it (the parser's
+    ``behaviour_class_name``).
     """
 
-    def __init__(self, name: str) -> None:
-        super().__init__(name)
+    # py_trees declares these as plain class attributes, read only (no ClassVar there either).
+    INPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012
+    OUTPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012
+
+
+    def __init__(self, name: str, *, manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self._own = _require_manager(name, manager) if manager is not None else None
         self._manager: ModeManager | None = None
 
+    #: Ports the behaviour wires to the blackboard itself (see :meth:`wire_port`).
+    WIRED_PORTS: frozenset[str] = frozenset()
+
+    def setup_ports(self, port_remappings: dict[str, str] | None = None, subtree_namespace: str = "/",
+                    logger: Any = None) -> None:
+        """The XML parser's wiring. sm_bt's own ports go to :meth:`wire_port` (no extra blackboard
+        client per behaviour); other declared ports (a subclass's) get py_trees' handling."""
+        remappings = dict(port_remappings or {})
+        declared = set(self.input_ports()) | set(self.output_ports())
+        for port in remappings:
+            if port not in declared:
+                raise KeyError(f"{self.name}: no port {port!r} (ports: {', '.join(sorted(declared)) or 'none'})")
+        for port in [p for p in remappings if p in self.WIRED_PORTS]:
+            self.wire_port(port, py_trees.blackboard.Blackboard.absolute_name(subtree_namespace, remappings.pop(port)))
+        if declared - self.WIRED_PORTS:
+            super().setup_ports(remappings, subtree_namespace, logger)
+        else:
+            self._subtree_namespace = subtree_namespace
+
+    def wire_port(self, port: str, key: str) -> None:
+        """Connect one of :attr:`WIRED_PORTS` to the absolute blackboard ``key``."""
+        raise NotImplementedError(port)
+
     def setup(self, **kwargs: Any) -> None:
-        manager = kwargs.get("manager")
+        given = kwargs.get("manager")
+        manager = self._own or attached_manager(self) or given
         if manager is None:
             raise NotSetUp(_hint(self))
-        if not isinstance(manager, ModeManager):
-            raise TypeError(f"{self.qualified_name}: manager= must be a ModeManager, not {type(manager).__name__}")
+        self._use(_require_manager(self.qualified_name, manager))
+
+    def _use(self, manager: ModeManager) -> None:
         self.validate(manager)
         self._manager = manager
 
     @property
+    def detail(self) -> str:
+        """What it works on, in a few words (``"pilot f_degraded_mode"``): viewers show it in the
+        behaviour's box, since they cut names short."""
+        return ""
+
+    @property
     def manager(self) -> ModeManager:
+        """The manager (found and validated on first use if ``setup`` did not run)."""
         if self._manager is None:
-            raise NotSetUp(_hint(self))
+            manager = self._own or attached_manager(self)
+            if manager is None:
+                raise NotSetUp(_hint(self))
+            self._use(manager)
+            assert self._manager is not None
         return self._manager
 
     def validate(self, manager: ModeManager) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from py_trees.common import Status
 
 from sm_bt.behaviours.change import _RequestBehaviour
@@ -23,8 +25,9 @@ class Reconfigure(_RequestBehaviour):
     Tick it when the statuses change (``reasoner.changed``), for instance behind a condition.
     """
 
-    def __init__(self, name: str, reasoner: Reasoner, timeout: float | None = None) -> None:
-        super().__init__(name, reasoner.part, timeout)
+    def __init__(self, name: str, reasoner: Reasoner, timeout: float | None = None, *,
+                 manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, reasoner.part, timeout, manager=manager, **kwargs)
         self.reasoner = reasoner
         self.decision_text = ""
 

@@ -10,7 +10,7 @@ from engine_helpers import Rig, bundled
 from py_trees.common import Status
 from tree_helpers import Flag, backend_requests, build, fresh_blackboard, settle, tick_for, tick_until, tick_until_done
 
-from sm_bt.behaviours import ChangeMode, ChangeState
+from sm_bt.behaviours import ChangeMode, ChangeState, FeedbackSnapshotVisitor
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State, StateMode
 
@@ -265,3 +265,24 @@ def test_interrupting_change_state_withdraws_it() -> None:
     assert change.status is Status.INVALID
     assert request is not None and request.reason == "cancelled"
     assert rig.manager.requests() == []
+
+
+def test_each_new_step_of_a_mode_change_flags_a_snapshot_as_changed() -> None:
+    rig = pilot_rig()
+    change = ChangeMode("Normal", "pilot", "f_normal_mode")
+    tree = py_trees.trees.BehaviourTree(change)
+    visitor = FeedbackSnapshotVisitor()
+    plain = py_trees.visitors.SnapshotVisitor()
+    tree.visitors += [visitor, plain]
+    tree.setup(manager=rig.manager)
+    flagged: list[tuple[bool, bool, str]] = []
+    while change.status is not Status.SUCCESS:
+        tree.tick()
+        flagged.append((visitor.changed, plain.changed, change.feedback_message))
+        rig.clock.advance(0.05)
+    running = [f for f in flagged if f[2] and "s)" not in f[2]]  # the RUNNING ticks
+    steps = {message for _, _, message in running}
+    assert len(steps) >= 2, steps  # configure, then activate: feedback moved while RUNNING
+    for (mine, plain_changed, message), (_, _, before) in zip(flagged[1:], flagged, strict=False):
+        assert mine == (plain_changed or message != before)
+    assert any(mine and not plain_changed for mine, plain_changed, _ in flagged[1:])

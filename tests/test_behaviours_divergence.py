@@ -151,6 +151,26 @@ def test_the_variable_is_removed_once_the_divergence_clears(rig: Rig) -> None:
     assert check.feedback_message == "every part on target"
 
 
+def test_the_variable_is_written_and_unset_only_when_it_changes(rig: Rig) -> None:
+    """Activity views (py-trees-blackboard-watcher -a, the tree watcher) show changes, not ticks."""
+    Blackboard.enable_activity_stream()
+    try:
+        check = OnDivergence("Diverges?")
+        tree = build(check, rig)
+        tick_for(tree, rig, 1.0)  # on target: nothing to unset, so nothing is written
+        fail_laser(rig)
+        tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+        tick_for(tree, rig, 1.0)  # the same divergence, ticked on
+        settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
+        tick_for(tree, rig, 1.0)  # cleared once, then on target
+        assert Blackboard.activity_stream is not None
+        kinds = [(item.key, item.activity_type) for item in Blackboard.activity_stream.data
+                 if item.activity_type in ("WRITE", "UNSET", "INITIALISED")]
+        assert kinds == [("/divergence", "INITIALISED"), ("/divergence", "UNSET")]
+    finally:
+        Blackboard.disable_activity_stream()
+
+
 def test_a_custom_variable_name(rig: Rig) -> None:
     check = OnDivergence("Laser lost?", "laser_resender", variable_name="laser/lost")
     tree = build(check, rig)
@@ -184,6 +204,7 @@ def test_every_part_is_written_under_system_modes() -> None:
     assert writer.feedback_message == "5 part(s) changed"
     for part in PILOT_PARTS:
         assert Blackboard.get(f"/system_modes/{part}") == PartStatus(part, "unconfigured", None, None, None, None)
+        assert str(Blackboard.get(f"/system_modes/{part}")) == "unconfigured (no target)"
     assert sorted(Blackboard.keys()) == sorted(f"/system_modes/{part}" for part in PILOT_PARTS)
 
 
@@ -193,8 +214,9 @@ def test_the_blackboard_follows_changes(rig: Rig) -> None:
     tree.tick()
     pilot = Blackboard.get("/system_modes/pilot")
     assert pilot == PartStatus("pilot", "active", "f_normal_mode", "active", "f_normal_mode", None)
-    assert pilot.state_mode == str(pilot) == "active.f_normal_mode"
-    assert str(Blackboard.get("/system_modes/pointcloud_to_laser")) == "inactive"
+    assert pilot.state_mode == "active.f_normal_mode"
+    assert str(pilot) == "active.f_normal_mode (target active.f_normal_mode)"
+    assert str(Blackboard.get("/system_modes/pointcloud_to_laser")) == "inactive (target inactive)"
     tree.tick()
     assert writer.feedback_message == "0 part(s) changed"
 
@@ -205,8 +227,12 @@ def test_the_blackboard_follows_changes(rig: Rig) -> None:
     assert laser == PartStatus("laser_resender", "unconfigured", None, "active", "__DEFAULT__", "grace")
     assert Blackboard.get("/system_modes/pilot").divergence == "grace"
     assert writer.feedback_message == "2 part(s) changed"
+    # str() is read when a watcher shows it: the divergence's age at that moment
+    assert str(laser) == "unconfigured (target active.__DEFAULT__: grace for 0.2 s)"
+    rig.clock.advance(0.9)
+    assert str(laser) == "unconfigured (target active.__DEFAULT__: grace for 1.1 s)"
 
-    rig.clock.advance(GRACE)
+    rig.clock.advance(GRACE - 0.9)
     tree.tick()
     assert Blackboard.get("/system_modes/laser_resender").divergence == "fault"
 
@@ -235,7 +261,7 @@ def test_a_namespace_and_a_subset_of_parts(rig: Rig) -> None:
     tree.tick()
     assert writer.blackboard.write == {"/robot/modes/pilot", "/robot/modes/amcl"}
     assert sorted(Blackboard.keys()) == ["/robot/modes/amcl", "/robot/modes/pilot"]
-    assert str(Blackboard.get("/robot/modes/amcl")) == "active.__DEFAULT__"
+    assert str(Blackboard.get("/robot/modes/amcl")) == "active.__DEFAULT__ (target active.__DEFAULT__)"
 
 
 def test_namespaced_part_names_nest_under_the_namespace() -> None:

@@ -98,7 +98,7 @@ def contingencies() -> Behaviour:
     laser_back = py_trees.composites.Sequence("Laser back", memory=True, children=[
         ModeIs("Degraded?", SYSTEM, DEGRADED),
         is_true("Scans healthy?", LASER_SCANS_OK, True),
-        ChangeMode(f"Switch to {NORMAL}", SYSTEM, NORMAL),
+        ChangeMode(f"{NORMAL} again", SYSTEM, NORMAL),
     ])
     return py_trees.composites.Selector("Contingencies", memory=False, children=[
         switch_on_divergence("Laser lost", "laser_resender", SYSTEM, DEGRADED),
@@ -111,7 +111,7 @@ def create_root(cycles: int = 2) -> Behaviour:
     """The pilot mission: ``cycles`` rounds of patrol-or-recharge, then SUCCESS."""
     start_up = py_trees.composites.Sequence("Start-up", memory=True, children=[
         ChangeState("Configure", SYSTEM, "configure"),
-        ChangeMode(f"Switch to {NORMAL}", SYSTEM, NORMAL),
+        ChangeMode(NORMAL, SYSTEM, NORMAL),
     ])
     mission_body = patrol(cycles)
     mission = py_trees.composites.Parallel(
