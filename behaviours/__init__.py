@@ -18,7 +18,13 @@ from sm_bt.behaviours.blackboard import ModesToBlackboard, PartStatus
 from sm_bt.behaviours.change import TRANSITIONS, ChangeMode, ChangeState
 from sm_bt.behaviours.checks import ModeIs, StateIs, WaitForMode, WaitForState
 from sm_bt.behaviours.divergence import OnDivergence
-from sm_bt.behaviours.idioms import HoldMode, hold_mode, switch_on_divergence
+from sm_bt.behaviours.idioms import (
+    HoldMode,
+    HoldModeSubtree,
+    SwitchOnDivergenceSubtree,
+    hold_mode,
+    switch_on_divergence,
+)
 from sm_bt.behaviours.manager_access import ManagerBehaviour, NotSetUp, attach_manager
 from sm_bt.behaviours.reconfigure import Reconfigure
 from sm_bt.behaviours.visitors import FeedbackSnapshotVisitor
@@ -29,6 +35,7 @@ __all__ = [
     "ChangeState",
     "FeedbackSnapshotVisitor",
     "HoldMode",
+    "HoldModeSubtree",
     "ManagerBehaviour",
     "ModeIs",
     "ModesToBlackboard",
@@ -37,6 +44,7 @@ __all__ = [
     "PartStatus",
     "Reconfigure",
     "StateIs",
+    "SwitchOnDivergenceSubtree",
     "WaitForMode",
     "WaitForState",
     "attach_manager",

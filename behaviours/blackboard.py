@@ -17,6 +17,7 @@ from py_trees.common import Status
 from sm_bt.behaviours.manager_access import ManagerBehaviour
 from sm_bt.engine.clock import Clock
 from sm_bt.engine.manager import ModeManager
+from sm_bt.model.types import Model
 
 
 @dataclass(frozen=True)
@@ -105,9 +106,9 @@ class ModesToBlackboard(ManagerBehaviour):
             self.blackboard.register_key(part, access=py_trees.common.Access.WRITE)
         self._written.clear()
 
-    def validate(self, manager: ModeManager) -> None:
+    def check_model(self, model: Model) -> None:
         for part in self.parts or ():
-            self._check_part(manager, part)
+            self._check_part(model, part)
 
     def update(self) -> Status:
         """Copy what changed; SUCCESS (there is nothing to wait for)."""

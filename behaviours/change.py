@@ -15,6 +15,7 @@ from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name,
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
+from sm_bt.model.types import Model
 
 #: The lifecycle transitions a tree may ask for, by label.
 TRANSITIONS = REQUESTABLE_LABELS
@@ -85,8 +86,8 @@ class ChangeMode(_RequestBehaviour):
     def detail(self) -> str:
         return f"{self.part} {self.mode}"
 
-    def validate(self, manager: ModeManager) -> None:
-        self._check_mode(manager, self.part, self.mode)
+    def check_model(self, model: Model) -> None:
+        self._check_mode(model, self.part, self.mode)
 
     def _make_request(self, manager: ModeManager) -> Request:
         return manager.change_mode(self.part, self.mode, timeout=self.timeout)
@@ -116,8 +117,8 @@ class ChangeState(_RequestBehaviour):
     def detail(self) -> str:
         return f"{self.part} {self.transition}"
 
-    def validate(self, manager: ModeManager) -> None:
-        self._check_part(manager, self.part)
+    def check_model(self, model: Model) -> None:
+        self._check_part(model, self.part)
 
     def _make_request(self, manager: ModeManager) -> Request:
         return manager.change_state(self.part, self.transition, timeout=self.timeout)

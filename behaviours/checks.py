@@ -16,12 +16,13 @@ from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name,
 from sm_bt.engine.inference import Actual
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.states import State
+from sm_bt.model.types import Model
 
 
 class _Predicate:
     """What a condition expects of a part's actual state and mode."""
 
-    def resolve(self, behaviour: ManagerBehaviour, manager: ModeManager, part: str) -> None:
+    def resolve(self, behaviour: ManagerBehaviour, model: Model, part: str) -> None:
         """Check the expectation against the model (at ``setup``)."""
 
     def holds(self, actual: Actual) -> bool:
@@ -36,8 +37,8 @@ class _InMode(_Predicate):
         self.mode = mode
         self.resolved = mode
 
-    def resolve(self, behaviour: ManagerBehaviour, manager: ModeManager, part: str) -> None:
-        self.resolved = behaviour._check_mode(manager, part, self.mode)
+    def resolve(self, behaviour: ManagerBehaviour, model: Model, part: str) -> None:
+        self.resolved = behaviour._check_mode(model, part, self.mode)
 
     def holds(self, actual: Actual) -> bool:
         return actual.state is State.ACTIVE and actual.mode == self.resolved
@@ -70,9 +71,9 @@ class _PartCondition(ManagerBehaviour, register=False):
     def detail(self) -> str:
         return f"{self.part} {self.expected}"
 
-    def validate(self, manager: ModeManager) -> None:
-        self._check_part(manager, self.part)
-        self.expected.resolve(self, manager, self.part)
+    def check_model(self, model: Model) -> None:
+        self._check_part(model, self.part)
+        self.expected.resolve(self, model, self.part)
 
     def _check(self) -> bool:
         actual = self.manager.actual(self.part)

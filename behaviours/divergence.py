@@ -11,6 +11,7 @@ from py_trees.ports import PortInformation
 from sm_bt.behaviours.manager_access import ManagerBehaviour, flag
 from sm_bt.engine.events import Divergence
 from sm_bt.engine.manager import ModeManager
+from sm_bt.model.types import Model
 
 
 class OnDivergence(ManagerBehaviour):
@@ -59,9 +60,9 @@ class OnDivergence(ManagerBehaviour):
     def detail(self) -> str:
         return self.part or "any part"
 
-    def validate(self, manager: ModeManager) -> None:
+    def check_model(self, model: Model) -> None:
         if self.part is not None:
-            self._check_part(manager, self.part)
+            self._check_part(model, self.part)
 
     def update(self) -> Status:
         """SUCCESS and write the divergence if there is one, FAILURE (and clear it) if not."""

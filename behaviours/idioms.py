@@ -10,6 +10,7 @@ from typing import Any
 
 import py_trees
 from py_trees.common import Status
+from py_trees.ports import PortInformation, PortsMixin
 
 from sm_bt.behaviours.change import ChangeMode
 from sm_bt.behaviours.divergence import OnDivergence
@@ -17,6 +18,7 @@ from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name,
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
+from sm_bt.model.types import Model
 
 log = logging.getLogger("sm_bt.behaviours")
 
@@ -51,8 +53,8 @@ class HoldMode(ManagerBehaviour, register=False):
     def detail(self) -> str:
         return f"{self.part} {self.mode}"
 
-    def validate(self, manager: ModeManager) -> None:
-        self._held = StateMode(State.ACTIVE, self._check_mode(manager, self.part, self.mode))
+    def check_model(self, model: Model) -> None:
+        self._held = StateMode(State.ACTIVE, self._check_mode(model, self.part, self.mode))
 
     @property
     def held(self) -> StateMode | None:
@@ -126,8 +128,8 @@ class HeldModeReady(ManagerBehaviour, register=False):
     def detail(self) -> str:
         return self.hold.detail
 
-    def validate(self, manager: ModeManager) -> None:
-        self._check_mode(manager, self.hold.part, self.hold.mode)
+    def check_model(self, model: Model) -> None:
+        self._check_mode(model, self.hold.part, self.hold.mode)
 
     def update(self) -> Status:
         """RUNNING while the hold's change is in progress, then SUCCESS or FAILURE at once."""
@@ -149,6 +151,54 @@ class HeldModeReady(ManagerBehaviour, register=False):
         return Status.FAILURE
 
 
+class _Subtree(PortsMixin, register=False):
+    """An idiom's subtree as one XML node: ports-enabled, without ports of its own."""
+
+    INPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012 (py_trees' read-only declaration)
+    OUTPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012
+
+    def setup_ports(self, port_remappings: dict[str, str] | None = None, subtree_namespace: str = "/",
+                    logger: Any = None) -> None:
+        if port_remappings:
+            raise KeyError(f"{self.name}: no ports (given: {', '.join(port_remappings)})")
+        self._subtree_namespace = subtree_namespace
+
+
+class HoldModeSubtree(_Subtree, py_trees.composites.Parallel, tag="HoldMode"):
+    """What :func:`hold_mode` returns; in XML ``<HoldMode name=".." part=".." mode=".."
+    [timeout=".."]>child</HoldMode>``."""
+
+    def __init__(self, name: str, part: str, mode: str, children: list[py_trees.behaviour.Behaviour] | None = None,
+                 timeout: float | None = None, *, manager: ModeManager | None = None, **kwargs: Any) -> None:
+        work = list(children or [])
+        if len(work) != 1:
+            raise ValueError(f"{name}: HoldMode holds its mode while exactly one child runs, not {len(work)}")
+        # Names lead with the mode (viewers cut long names short) and hold no ':' (dot reads a port).
+        hold = HoldMode(f"Hold {mode}", part, mode, timeout=timeout, manager=manager)
+        gated = py_trees.composites.Sequence(f"{mode} work", memory=True, children=[
+            HeldModeReady(f"{mode} reached?", hold, manager=manager),
+            work[0],
+        ])
+        super().__init__(name, policy=py_trees.common.ParallelPolicy.SuccessOnOne(), children=[hold, gated],
+                         **kwargs)
+
+
+class SwitchOnDivergenceSubtree(_Subtree, py_trees.composites.Sequence, tag="SwitchOnDivergence"):
+    """What :func:`switch_on_divergence` returns; in XML ``<SwitchOnDivergence name=".."
+    part=".." system=".." mode=".." [timeout=".."]/>`` (no ``part``: any part)."""
+
+    def __init__(self, name: str, system: str, mode: str, part: str | None = None, timeout: float | None = None,
+                 children: list[py_trees.behaviour.Behaviour] | None = None, *, manager: ModeManager | None = None,
+                 **kwargs: Any) -> None:
+        if children:
+            raise ValueError(f"{name}: SwitchOnDivergence has no children of its own (given {len(children)})")
+        watched = part or "any part"
+        super().__init__(name, memory=True, children=[
+            OnDivergence(f"{watched} diverged?", part, manager=manager),
+            ChangeMode(f"{mode} on divergence", system, mode, timeout=timeout, manager=manager),
+        ], **kwargs)
+
+
 def hold_mode(name: str, part: str, mode: str, child: py_trees.behaviour.Behaviour,
               timeout: float | None = None) -> py_trees.behaviour.Behaviour:
     """Run ``child`` with ``part`` held in ``mode``; restore the part's previous target when the
@@ -159,16 +209,7 @@ def hold_mode(name: str, part: str, mode: str, child: py_trees.behaviour.Behavio
     the subtree has the child's result, and it fails if the mode cannot be reached (within
     ``timeout``, or the manager's ``request_timeout``) or is lost before the child starts.
     """
-    # Names lead with the mode (viewers cut long names short) and hold no ':' (dot reads a port).
-    hold = HoldMode(f"Hold {mode}", part, mode, timeout=timeout)
-    work = py_trees.composites.Sequence(f"{mode} work", memory=True, children=[
-        HeldModeReady(f"{mode} reached?", hold),
-        child,
-    ])
-    return py_trees.composites.Parallel(name, policy=py_trees.common.ParallelPolicy.SuccessOnOne(), children=[
-        hold,
-        work,
-    ])
+    return HoldModeSubtree(name, part, mode, [child], timeout=timeout)
 
 
 def switch_on_divergence(name: str, part: str | None, system: str, mode: str,
@@ -181,8 +222,4 @@ def switch_on_divergence(name: str, part: str | None, system: str, mode: str,
     the mode change running even though switching clears the divergence. FAILURE when there is
     no divergence, else the mode change's result.
     """
-    watched = part or "any part"
-    return py_trees.composites.Sequence(name, memory=True, children=[
-        OnDivergence(f"{watched} diverged?", part),
-        ChangeMode(f"{mode} on divergence", system, mode, timeout=timeout),
-    ])
+    return SwitchOnDivergenceSubtree(name, system, mode, part=part, timeout=timeout)

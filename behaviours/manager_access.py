@@ -22,7 +22,7 @@ import py_trees
 from py_trees.ports import PortInformation, PortsMixin
 
 from sm_bt.engine.manager import ModeManager
-from sm_bt.model.types import DEFAULT_MODE
+from sm_bt.model.types import DEFAULT_MODE, Model
 
 
 class NotSetUp(RuntimeError):
@@ -105,7 +105,7 @@ class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False)
 
     ``manager`` (optional) is the behaviour's own; otherwise :func:`attach_manager` on an
     ancestor, otherwise ``setup(manager=...)``. ``setup`` finds the manager and validates the
-    behaviour's configuration (see :meth:`validate`): it raises :class:`NotSetUp` when there is
+    behaviour's configuration against the model (see :meth:`check_model`): it raises :class:`NotSetUp` when there is
     no manager and ``ValueError`` for a part or mode the model does not have. A behaviour that
     was never set up (a subtree inserted at run time) does the same when it first needs the
     manager.
@@ -156,7 +156,7 @@ class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False)
         self._use(_require_manager(self.qualified_name, manager))
 
     def _use(self, manager: ModeManager) -> None:
-        self.validate(manager)
+        self.check_model(manager.model)
         self._manager = manager
 
     @property
@@ -176,24 +176,25 @@ class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False)
             assert self._manager is not None
         return self._manager
 
-    def validate(self, manager: ModeManager) -> None:
-        """Check the configuration against ``manager.model``; raise ``ValueError`` if it is wrong."""
+    def check_model(self, model: Model) -> None:
+        """Check the configuration against ``model`` (parts, modes); ``ValueError`` if it is wrong.
+        Needs no manager: ``sm-bt check`` runs it on tree files."""
 
     # -- shared checks -------------------------------------------------------------------------
 
-    def _check_part(self, manager: ModeManager, part: str) -> None:
-        if part not in manager.model.parts:
+    def _check_part(self, model: Model, part: str) -> None:
+        if part not in model.parts:
             raise ValueError(f"{self.qualified_name}: unknown part {part!r} "
-                             f"(parts: {', '.join(manager.model.parts)})")
+                             f"(parts: {', '.join(model.parts)})")
 
-    def _check_mode(self, manager: ModeManager, part: str, mode: str) -> str:
+    def _check_mode(self, model: Model, part: str, mode: str) -> str:
         """The mode name ``mode`` stands for (``__DEFAULT__`` is the part's default mode)."""
-        self._check_part(manager, part)
+        self._check_part(model, part)
         require_mode_name(self.name, part, mode)
-        spec = manager.model.parts[part]
+        spec = model.parts[part]
         if mode in spec.modes:
             return mode
         if mode == DEFAULT_MODE:
             return spec.default_mode
         raise ValueError(f"{self.qualified_name}: {part} has no mode {mode!r} "
-                         f"(modes: {', '.join(manager.available_modes(part))})")
+                         f"(modes: {', '.join(sorted(spec.modes))})")

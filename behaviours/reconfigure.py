@@ -9,6 +9,7 @@ from py_trees.common import Status
 from sm_bt.behaviours.change import _RequestBehaviour
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
+from sm_bt.model.types import Model
 from sm_bt.reasoner import Reasoner
 
 
@@ -31,10 +32,10 @@ class Reconfigure(_RequestBehaviour):
         self.reasoner = reasoner
         self.decision_text = ""
 
-    def validate(self, manager: ModeManager) -> None:
-        self._check_part(manager, self.part)
+    def check_model(self, model: Model) -> None:
+        self._check_part(model, self.part)
         try:
-            self.reasoner.check(manager.model)
+            self.reasoner.check(model)
         except ValueError as error:
             raise ValueError(f"{self.qualified_name}: {error}") from None
 

@@ -130,21 +130,46 @@ def _add_lenient(parser: argparse.ArgumentParser) -> None:
 
 
 def _check_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("models", nargs="+", metavar="MODEL",
-                        help="model file, or the name of a bundled model (" + ", ".join(bundled_names()) + ")")
+    parser.add_argument("models", nargs="+", metavar="FILE",
+                        help="model file, or the name of a bundled model (" + ", ".join(bundled_names()) + "); "
+                             "a mission tree file (.xml) is checked against the models given with it")
     _add_lenient(parser)
 
 
 def run_check(args: argparse.Namespace) -> int:
     failed = 0
+    trees = [name for name in args.models if name.endswith(".xml")]
+    models: list[tuple[str, Model]] = []
     for name in args.models:
+        if name in trees:
+            continue
         model = _load_or_report(name, strict=not args.lenient)
         if model is None:
             failed += 1
             continue
+        models.append((name, model))
         print(f"{name}: ok ({_plural(len(model.systems), 'system')}, {_plural(len(model.nodes), 'node')})")
         _print_issues(model.warnings, sys.stdout)
+    for tree in trees:
+        failed += not _check_tree_file(tree, models)
     return 1 if failed else 0
+
+
+def _check_tree_file(tree: str, models: list[tuple[str, Model]]) -> bool:
+    """Check ``tree`` against every model (or alone, without one); print what was found."""
+    import sm_bt.trees.pilot  # noqa: F401 (registers the pilot's actions, which shipped trees use)
+    from sm_bt.trees.mission_xml import check_tree
+
+    against: list[tuple[str, Model | None]] = list(models) or [("", None)]
+    ok = True
+    for name, model in against:
+        issues = check_tree(tree, model)
+        for issue in issues:
+            print(issue, file=sys.stderr)
+        ok = ok and not issues
+        if not issues:
+            print(f"{tree}: ok" + (f" against {name}" if name else " (no model given: parts and modes not checked)"))
+    return ok
 
 
 # -- modes -------------------------------------------------------------------------------------

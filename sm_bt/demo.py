@@ -46,6 +46,7 @@ from sm_bt.monitor import Monitor, terminal_console
 from sm_bt.sim import SimBackend
 from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
+from sm_bt.trees.mission_xml import TreeFileError, load_tree
 from sm_bt.trees.pilot_actions import BATTERY_OK, NavigateTo, Recharge
 
 #: What Nav2's parameter files give the nodes before any mode is applied (the pilot's TB3 set-up).
@@ -57,6 +58,21 @@ TREES: dict[str, Callable[[int], py_trees.behaviour.Behaviour]] = {
     "pilot": lambda cycles: pilot.create_root(cycles),
     "metacontrol": lambda cycles: pilot_metacontrol.create_root(cycles),
 }
+
+
+def mission_root(tree: str, cycles: int, model: Model) -> py_trees.behaviour.Behaviour:
+    """The mission tree ``tree`` names: a shipped tree, or an XML tree file (its ``{cycles}``
+    set); ``TreeFileError`` for a tree file with mistakes."""
+    if tree in TREES:
+        return TREES[tree](cycles)
+    return load_tree(tree, model=model, inputs={"cycles": cycles})
+
+
+def _tree(text: str) -> str:
+    if text in TREES or text.endswith(".xml"):
+        return text
+    raise argparse.ArgumentTypeError(f"{text!r} is neither a shipped tree ({', '.join(sorted(TREES))}) "
+                                     "nor a tree file (.xml)")
 #: The manager's options on both platforms. One recovery attempt: a laser that fails again at once
 #: is then left to the tree.
 MANAGER_OPTIONS: dict[str, Any] = {"request_timeout": 10.0, "grace_period": 1.0, "recovery_attempts": 1}
@@ -178,8 +194,8 @@ class Story:
 
 class Demo:
     def __init__(self, options: Options, console: Console | None = None) -> None:
-        if options.tree not in TREES:
-            raise ValueError(f"unknown tree {options.tree!r} (trees: {', '.join(TREES)})")
+        if options.tree not in TREES and not options.tree.endswith(".xml"):
+            raise ValueError(f"unknown tree {options.tree!r} (trees: {', '.join(TREES)}, or a .xml tree file)")
         if options.ros and not options.speed > 0:
             raise ValueError("--speed must be more than 0 with --ros (world seconds per wall second)")
         self.options = options
@@ -196,7 +212,7 @@ class Demo:
         try:
             self.manager = self.platform.manager
             self.clock = self.manager.clock
-            self.root = TREES[options.tree](options.cycles)
+            self.root = mission_root(options.tree, options.cycles, self.model)
             self.tree = py_trees.trees.BehaviourTree(self.root)
             self.snapshot = py_trees.visitors.SnapshotVisitor()
             self.tree.add_visitor(self.snapshot)
@@ -418,8 +434,10 @@ class Demo:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--tree", choices=sorted(TREES), default="pilot",
-                        help="contingencies in the tree (pilot, default) or chosen by a metacontroller")
+    parser.add_argument("--tree", type=_tree, default="pilot", metavar="TREE",
+                        help="contingencies in the tree (pilot, default), chosen by a metacontroller "
+                             "(metacontrol), or a mission tree file in XML (trees/pilot.xml is the pilot "
+                             "tree; {cycles} in it is --cycles)")
     parser.add_argument("--laser-failure-at", type=_time, default=15.0, metavar="SECONDS",
                         help="world time the laser breaks; 'never' for no failure (default 15)")
     parser.add_argument("--laser-repair-at", type=_time, default=Auto.AUTO, metavar="SECONDS",
@@ -452,7 +470,11 @@ def run(args: argparse.Namespace) -> int:
     options = Options(laser_failure_at=args.laser_failure_at, laser_repair_at=args.laser_repair_at,
                       cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree, ros=args.ros)
     if not options.ros:
-        return Demo(options).run()
+        try:
+            return Demo(options).run()
+        except TreeFileError as error:
+            print(error, file=sys.stderr)
+            return 1
     from sm_bt.cli import PROG, CliError  # not at the top: sm_bt.cli imports this module
     from sm_bt.ros.environment import RosUnavailable
     from sm_bt.ros.node_process import NodesError  # needs no rclpy
@@ -464,3 +486,6 @@ def run(args: argparse.Namespace) -> int:
         return Demo(options).run()
     except (RosUnavailable, NodesError) as error:
         raise CliError(str(error)) from None
+    except TreeFileError as error:
+        print(error, file=sys.stderr)
+        return 1

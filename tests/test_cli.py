@@ -123,6 +123,25 @@ def test_a_file_wins_over_a_bundled_name(capsys: pytest.CaptureFixture[str], tmp
     assert out.startswith("pilot: ok (2 systems, 5 nodes)")
 
 
+def test_check_a_tree_file_against_the_model_given_with_it(capsys: pytest.CaptureFixture[str],
+                                                         tmp_path: Path) -> None:
+    from sm_bt.trees import pilot
+
+    code, out, err = run(capsys, "check", "pilot", pilot.XML)
+    assert (code, err) == (0, "")
+    assert out.splitlines()[-1] == f"{pilot.XML}: ok against pilot"
+    bad = tmp_path / "bad.xml"
+    bad.write_text('<root>\n  <BehaviorTree ID="M">\n    <Sequence>\n      <ModeIs part="pilto" mode="x"/>\n'
+                   '      <Bogus/>\n    </Sequence>\n  </BehaviorTree>\n</root>\n')
+    code, out, err = run(capsys, "check", "pilot", bad, pilot.XML)
+    assert code == 1
+    assert err.splitlines() == [f"{bad}:4: error: <ModeIs 'ModeIs'>: unknown part 'pilto' (parts: pilot, amcl, "
+                                "controller_server, pointcloud_to_laser, laser_resender)",
+                                f"{bad}:5: error: unknown node <Bogus> (import the module that defines it, or pass "
+                                "it in registry=)"]
+    assert out.splitlines()[-1] == f"{pilot.XML}: ok against pilot"  # the other files are still checked
+
+
 # -- modes -------------------------------------------------------------------------------------
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import re
+from pathlib import Path
 
 import pytest
 from rich.console import Console
@@ -70,3 +71,33 @@ def test_quiet_prints_only_the_summary(capsys: pytest.CaptureFixture[str]) -> No
 def test_bad_options_are_usage_errors(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["demo", *argv]) == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+def test_the_xml_pilot_tree_runs_the_same_demo_as_the_python_one() -> None:
+    from sm_bt.trees import pilot
+
+    code, xml_text, xml_demo = run_demo(tree=str(pilot.XML))
+    _, python_text, python_demo = run_demo(tree="pilot")
+    assert code == 0, xml_text
+    assert _told(xml_demo) == _told(python_demo)
+    assert _summary(xml_text) == _summary(python_text)
+
+
+def _told(demo: Demo) -> str:
+    return re.sub(r"#\d+", "#", repr(demo.story))  # request numbers count the process's requests
+
+
+def _summary(text: str) -> list[str]:
+    lines = text.splitlines()
+    return [line for line in lines[lines.index("Summary"):] if "wall" not in line]
+
+
+def test_a_tree_file_with_mistakes_is_an_error_with_its_lines(capsys: pytest.CaptureFixture[str],
+                                                              tmp_path: Path) -> None:
+    bad = tmp_path / "bad.xml"
+    bad.write_text('<root>\n  <BehaviorTree ID="M">\n    <ChangeMode part="pilot" mode="f_fast"/>\n'
+                   "  </BehaviorTree>\n</root>\n")
+    assert main(["demo", "--speed", "0", "--tree", str(bad)]) == 1
+    _, err = capsys.readouterr()
+    assert err.startswith(f"{bad}:3: error: <ChangeMode 'ChangeMode'>: pilot has no mode 'f_fast'")
+    assert "Traceback" not in err

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Iterator
 
 import py_trees
@@ -9,15 +10,18 @@ import pytest
 from engine_helpers import bundled
 from py_trees.common import Status
 
+from sm_bt.engine.events import Event
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model
 from sm_bt.sim import SimBackend
 from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
+from sm_bt.trees.mission_xml import load_tree
 from sm_bt.trees.pilot_actions import NavigateTo, Recharge
 
 TREES: dict[str, Callable[[int], py_trees.behaviour.Behaviour]] = {
     "pilot": lambda cycles: pilot.create_root(cycles),
+    "pilot_xml": lambda cycles: load_tree(pilot.XML, inputs={"cycles": cycles}),
     "metacontrol": lambda cycles: pilot_metacontrol.create_root(cycles),
 }
 DEGRADED_AMCL = {"transform_tolerance": 2.5, **{f"alpha{i}": 0.05 for i in range(1, 6)}}
@@ -214,3 +218,35 @@ def test_a_faster_world_drives_and_recharges_in_less_clock_time() -> None:
 def test_a_world_time_scale_must_be_a_finite_positive_number(scale: float) -> None:
     with pytest.raises(ValueError, match="time_scale must be a finite number > 0"):
         World(time_scale=scale)
+
+
+def _story(tree: str) -> list[tuple[float, str, str, str]]:
+    """Every event of the manager over one scripted mission: normal, the laser fails and is
+    repaired, the battery runs low, the patrol completes."""
+    mission = Mission(tree, cycles=1)
+    story: list[tuple[float, str, str, str]] = []
+    mission.manager.subscribe(lambda event: story.append(_told(mission.clock.now(), event)))
+    mission.until(lambda: mission.world.odometer > 2.0)
+    mission.laser.break_laser()
+    mission.until(lambda: mission.pilot == "active.f_degraded_mode", limit=10.0)
+    mission.until(lambda: mission.clock.now() > 20.0)
+    mission.laser.repair()
+    mission.until(lambda: mission.pilot == "active.f_normal_mode", limit=5.0)
+    mission.world.battery = 0.49
+    mission.until(lambda: mission.world.battery == 1.0)
+    mission.world.drain_per_metre = 0.0
+    mission.until(lambda: mission.root.status is Status.SUCCESS, limit=300.0)
+    return story
+
+
+def _told(now: float, event: Event) -> tuple[float, str, str, str]:
+    # request numbers count every request made in the process
+    return (round(now, 3), event.kind.value, event.part, re.sub(r"#\d+", "#", str(event)))
+
+
+def test_the_xml_mission_tells_the_same_story_as_the_python_one() -> None:
+    python, xml = _story("pilot"), _story("pilot_xml")
+    assert len(python) > 50  # modes changed, a rule fired, recovery and a hold happened
+    kinds = {kind for _, kind, _, _ in python}
+    assert {"target", "actual", "divergence", "request"} <= kinds
+    assert xml == python

@@ -14,11 +14,10 @@ Set it up with ``tree.setup(manager=ModeManager(load_model(...pilot...), backend
 
 from __future__ import annotations
 
-import operator
+from pathlib import Path
 
 import py_trees
 from py_trees.behaviour import Behaviour
-from py_trees.common import ComparisonExpression
 
 from sm_bt.behaviours import (
     ChangeMode,
@@ -33,10 +32,14 @@ from sm_bt.trees.pilot_actions import (
     BATTERY_OK,
     LASER_SCANS_OK,
     BatteryToBlackboard,
+    FlagIs,
     NavigateTo,
     Recharge,
     ScansToBlackboard,
 )
+
+#: The same mission in BehaviorTree.CPP-style XML (:func:`sm_bt.trees.mission_xml.load_tree`).
+XML = Path(__file__).with_name("pilot.xml")
 
 SYSTEM = "pilot"
 NORMAL = "f_normal_mode"
@@ -45,9 +48,8 @@ ENERGY_SAVING = "f_energy_saving_mode"
 
 
 def is_true(name: str, key: str, value: bool) -> Behaviour:
-    """A blackboard check (py_trees' CheckBlackboardVariableValue): SUCCESS when ``key == value``."""
-    return py_trees.behaviours.CheckBlackboardVariableValue(
-        name, check=ComparisonExpression(key, value, operator.eq))
+    """A blackboard check: SUCCESS when ``key`` holds ``value`` (:class:`FlagIs`)."""
+    return FlagIs(name, key, value)
 
 
 def gather() -> py_trees.composites.Sequence:
@@ -114,10 +116,12 @@ def create_root(cycles: int = 2) -> Behaviour:
         ChangeMode(NORMAL, SYSTEM, NORMAL),
     ])
     mission_body = patrol(cycles)
+    # Done when the patrol is: the contingencies never succeed (a switch they make counts as
+    # still watching), which XML can say too (py_trees' XML has no SuccessOnSelected).
     mission = py_trees.composites.Parallel(
         "Patrol with contingencies",
-        policy=py_trees.common.ParallelPolicy.SuccessOnSelected([mission_body], synchronise=False),
-        children=[contingencies(), mission_body],
+        policy=py_trees.common.ParallelPolicy.SuccessOnOne(),
+        children=[py_trees.decorators.SuccessIsRunning("Keep watching", contingencies()), mission_body],
     )
     return py_trees.composites.Sequence("Pilot", memory=False, children=[
         gather(),

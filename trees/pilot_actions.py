@@ -12,10 +12,11 @@ from typing import Any
 
 import py_trees
 from py_trees.common import Access, Status
+from py_trees.ports import PortInformation, PortsMixin
 
-from sm_bt.behaviours.manager_access import ManagerBehaviour
-from sm_bt.engine.manager import ModeManager
+from sm_bt.behaviours.manager_access import ManagerBehaviour, flag
 from sm_bt.model.states import State
+from sm_bt.model.types import Model
 from sm_bt.sim.world import World
 
 #: Blackboard keys the pilot's sensors write (booleans: True = component OK).
@@ -32,9 +33,9 @@ def _world(behaviour: py_trees.behaviour.Behaviour, kwargs: dict[str, Any]) -> W
     return world
 
 
-class _WorldBehaviour(ManagerBehaviour):
-    def __init__(self, name: str) -> None:
-        super().__init__(name)
+class _WorldBehaviour(ManagerBehaviour, register=False):
+    def __init__(self, name: str, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
         self._world: World | None = None
 
     def setup(self, **kwargs: Any) -> None:
@@ -63,17 +64,17 @@ class NavigateTo(_WorldBehaviour):
 
     def __init__(self, name: str, waypoint: str, controller: str = "controller_server",
                  speed_parameter: str = "FollowPath.max_vel_x",
-                 lasers: tuple[str, ...] = ("laser_resender", "pointcloud_to_laser")) -> None:
-        super().__init__(name)
+                 lasers: tuple[str, ...] = ("laser_resender", "pointcloud_to_laser"), **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
         self.waypoint = waypoint
         self.controller = controller
         self.speed_parameter = speed_parameter
         self.lasers = lasers
         self._last = 0.0
 
-    def validate(self, manager: ModeManager) -> None:
+    def check_model(self, model: Model) -> None:
         for part in (self.controller, *self.lasers):
-            self._check_part(manager, part)
+            self._check_part(model, part)
 
     def setup(self, **kwargs: Any) -> None:
         super().setup(**kwargs)
@@ -115,8 +116,8 @@ class Recharge(_WorldBehaviour):
     RUNNING while charging, SUCCESS when done.
     """
 
-    def __init__(self, name: str, duration: float = 10.0) -> None:
-        super().__init__(name)
+    def __init__(self, name: str, duration: float = 10.0, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
         self.duration = duration
         self._started = 0.0
 
@@ -137,8 +138,9 @@ class BatteryToBlackboard(_WorldBehaviour):
     """The pilot's battery monitor: the level, and the component status with hysteresis
     (failed below ``low``, recovered above ``recovered``), on the blackboard. Always SUCCESS."""
 
-    def __init__(self, name: str = "Battery to Blackboard", low: float = 0.5, recovered: float = 0.8) -> None:
-        super().__init__(name)
+    def __init__(self, name: str = "Battery to Blackboard", low: float = 0.5, recovered: float = 0.8,
+                 **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
         self.low = low
         self.recovered = recovered
         self.blackboard = self.attach_blackboard_client(name)
@@ -164,8 +166,8 @@ class ScansToBlackboard(_WorldBehaviour):
     """Whether the laser's scans are healthy (the world's laser works), on the blackboard.
     Always SUCCESS."""
 
-    def __init__(self, name: str = "Scans to Blackboard") -> None:
-        super().__init__(name)
+    def __init__(self, name: str = "Scans to Blackboard", **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
         self.blackboard = self.attach_blackboard_client(name)
         self.blackboard.register_key(LASER_SCANS_OK, access=Access.WRITE)
 
@@ -173,3 +175,31 @@ class ScansToBlackboard(_WorldBehaviour):
         self.blackboard.set(LASER_SCANS_OK, self.world.laser_ok)
         self.feedback_message = "scans OK" if self.world.laser_ok else "scans all zero"
         return Status.SUCCESS
+
+
+class FlagIs(PortsMixin, py_trees.behaviour.Behaviour):
+    """Does the boolean blackboard variable ``key`` hold ``value``? SUCCESS if it does,
+    FAILURE if not (or if nothing was written yet); never RUNNING. In XML
+    ``<FlagIs name="Battery low?" key="/components/battery" value="false"/>``."""
+
+    INPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012 (py_trees' read-only declaration)
+    OUTPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012
+
+    def __init__(self, name: str, key: str, value: bool | str = True, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self.key = key
+        self.value = flag(name, value, "value")
+        self.blackboard = self.attach_blackboard_client(name)
+        self.blackboard.register_key(key, access=Access.READ)
+
+    def setup_ports(self, port_remappings: dict[str, str] | None = None, subtree_namespace: str = "/",
+                    logger: Any = None) -> None:
+        if port_remappings:
+            raise KeyError(f"{self.name}: no ports (given: {', '.join(port_remappings)})")
+        self._subtree_namespace = subtree_namespace
+
+    def update(self) -> Status:
+        """SUCCESS when ``key`` is ``value``, FAILURE otherwise."""
+        current = self.blackboard.get(self.key) if self.blackboard.exists(self.key) else None
+        self.feedback_message = f"{self.key} is {current}"
+        return Status.SUCCESS if current is self.value else Status.FAILURE

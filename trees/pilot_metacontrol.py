@@ -15,7 +15,7 @@ from py_trees.behaviour import Behaviour
 from py_trees.common import Access, Status
 
 from sm_bt.behaviours import ChangeState, ManagerBehaviour, Reconfigure
-from sm_bt.engine.manager import ModeManager
+from sm_bt.model.types import Model
 from sm_bt.reasoner import Reasoner, pilot_reasoner
 from sm_bt.trees import pilot
 from sm_bt.trees.pilot import SYSTEM, go_and_recharge, is_true, patrolling
@@ -41,8 +41,8 @@ class ComponentsToReasoner(ManagerBehaviour):
         self.blackboard.register_key(BATTERY_OK, access=Access.READ)
         self.blackboard.register_key(LASER_SCANS_OK, access=Access.READ)
 
-    def validate(self, manager: ModeManager) -> None:
-        self._check_part(manager, self.laser)
+    def check_model(self, model: Model) -> None:
+        self._check_part(model, self.laser)
 
     def update(self) -> Status:
         if self.blackboard.exists(BATTERY_OK):
