@@ -25,13 +25,15 @@ def run_domain_id() -> int:
     return 10 + os.getpid() % 90
 
 
-def prepare(*, own_domain: bool = False) -> None:
+def prepare(*, own_domain: bool = False, local_only: bool = True) -> None:
     """Set what DDS reads at start-up, keeping whatever the user already set.
 
     ``own_domain`` picks a per-run ``ROS_DOMAIN_ID`` when none is set (demo, tests); otherwise
-    ROS's default domain applies.
+    ROS's default domain applies. ``local_only`` keeps discovery on this machine unless the user
+    chose a range; ``False`` leaves ROS's default (a robot spread over machines).
     """
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if local_only:
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if own_domain:
         os.environ.setdefault("ROS_DOMAIN_ID", str(run_domain_id()))
     if "ROS_LOG_DIR" not in os.environ:

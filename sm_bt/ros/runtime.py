@@ -6,12 +6,19 @@
         tree.setup(manager=ros.manager)
         ...tick...
 
-It owns its own rclpy context (so it never disturbs another user of rclpy in the process; its
-nodes share one DDS participant) and three nodes, each spun by its own executor thread (py_trees
-ticks in the caller's thread; the manager is thread-safe): ``node`` serves the reference's mode
-manager interface (:class:`~sm_bt.ros.manager_node.ModeManagerServer`), ``backend_node``
-(``<name>_backend``) makes the calls that change the managed nodes and hears their events, and
-``watch_node`` (``<name>_watch``) asks for their state and parameters (discovery, liveness).
+By default it owns its own rclpy context (so it never disturbs another user of rclpy in the
+process) and three nodes, each spun by its own executor thread (py_trees ticks in the caller's
+thread; the manager is thread-safe): ``node`` serves the reference's mode manager interface
+(:class:`~sm_bt.ros.manager_node.ModeManagerServer`), ``backend_node`` (``<name>_backend``) makes
+the calls that change the managed nodes and hears their events, and ``watch_node``
+(``<name>_watch``) asks for their state and parameters (discovery, liveness). All nodes of a
+context share one DDS participant.
+
+``RosRuntime(model, node=app_node)`` uses a node the application owns and spins (the node of a
+``py_trees_ros`` tree, a launch file's node) instead: the interface is served on it, the helper
+nodes join its context (still one participant per process), and ``close()`` removes only what the
+runtime added. Either side may shut down first: ``close()`` after the node was destroyed or the
+context shut down has nothing left to remove and does not raise.
 Apart, each executor wakes over its own entities only: rclpy's executor rebuilds its wait set
 over every entity of its nodes for every message it handles (with 20 managed nodes, 1.9 ms for
 all of them together, 0.8 ms for the backend's), and the backend handles one per answer and
@@ -22,8 +29,11 @@ first, then the manager and backend, then the nodes and context.
 from __future__ import annotations
 
 import contextlib
+import functools
+import logging
 import threading
-from collections.abc import Mapping
+import time
+from collections.abc import Callable, Mapping, Sequence
 from types import TracebackType
 from typing import Any
 
@@ -33,8 +43,18 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.ros.environment import prepare, require_ros
 
+log = logging.getLogger("sm_bt.ros.runtime")
+
 #: The reference manager's node name.
 MANAGER_NODE_NAME = "__mode_manager"
+
+
+def _quietly(action: Callable[[], object], what: str) -> None:
+    """Shutdown steps that the other side's shutdown may have done already."""
+    try:
+        action()
+    except Exception:
+        log.debug("%s: already done by the application's shutdown", what, exc_info=True)
 
 
 class RosRuntime:
@@ -48,8 +68,9 @@ class RosRuntime:
 
     def __init__(self, model: Model, *, node_name: str = MANAGER_NODE_NAME, serve: bool = True,
                  own_domain: bool = False, manager_options: Mapping[str, Any] | None = None,
-                 backend_options: Mapping[str, Any] | None = None) -> None:
-        prepare(own_domain=own_domain)
+                 backend_options: Mapping[str, Any] | None = None, node: Any = None) -> None:
+        if node is None:
+            prepare(own_domain=own_domain)
         require_ros()
         import rclpy
         from rclpy.context import Context
@@ -60,19 +81,26 @@ class RosRuntime:
         from sm_bt.ros.manager_node import ModeManagerServer
 
         self.model = model
-        self.context = Context()
-        # No rclpy signal handlers: the owner of the process decides what SIGINT means (a mission
-        # tree, sm-bt manager), and the shutdown order stays close()'s.
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self._owns_node = node is None
+        if node is None:
+            self.context = Context()
+            # No rclpy signal handlers: the owner of the process decides what SIGINT means (a
+            # mission tree, sm-bt manager), and the shutdown order stays close()'s.
+            rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+            self.node = rclpy.create_node(node_name, context=self.context)
+        else:
+            self.context = node.context
+            self.node = node
+            node_name = node.get_name()
         self.clock = WallClock("sm_bt-ros-clock")
-        self.node = rclpy.create_node(node_name, context=self.context)
         # The helper nodes have no parameters: without parameter services they wake over fewer entities.
         self.backend_node = rclpy.create_node(f"{node_name}_backend", context=self.context,
                                               start_parameter_services=False)
         self.watch_node = rclpy.create_node(f"{node_name}_watch", context=self.context,
                                             start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        if self._owns_node:  # an application's node is spun by the application
+            self.executor.add_node(self.node)
         self.backend_executor = SingleThreadedExecutor(context=self.context)
         self.backend_executor.add_node(self.backend_node)
         self.watch_executor = SingleThreadedExecutor(context=self.context)
@@ -112,23 +140,43 @@ class RosRuntime:
         with contextlib.suppress(ExternalShutdownException):
             executor.spin()
 
+    def wait_for_nodes(self, timeout: float = 10.0, nodes: Sequence[str] | None = None) -> None:
+        """Block until the manager reaches every node of the model (or ``nodes``): found on the
+        ROS graph, answering, state and parameters known. ``TimeoutError`` after ``timeout``
+        seconds names the ones it does not reach and why. For start-up, not for a tick."""
+        names = list(nodes) if nodes is not None else [node.name for node in self.model.nodes]
+        for name in names:
+            self.model.part(name)  # KeyError for a name the model does not have
+        deadline = time.monotonic() + timeout
+        while True:
+            missing = [name for name in names if not self.manager.observation(name).reachable]
+            if not missing:
+                return
+            if time.monotonic() >= deadline:
+                why = [f"{name} ({self.manager.observation(name).gone or 'not found on the ROS graph'})"
+                       for name in missing]
+                raise TimeoutError(f"not reachable after {timeout:g} s: {', '.join(why)}")
+            time.sleep(0.02)
+
     def close(self) -> None:
-        """Stop serving and managing; idempotent."""
+        """Stop serving and managing; idempotent. Removes only what the runtime made: an
+        application's node stays (without the interface), its context too."""
         if self._closed:
             return
         self._closed = True
-        for executor in self._executors:
-            executor.shutdown(timeout_sec=2.0)
+        for executor in self._executors:  # a context shut down first has stopped them already
+            _quietly(functools.partial(executor.shutdown, timeout_sec=2.0), "executor shutdown")
         for thread in self._threads:
             thread.join(3.0)
-        if self.server is not None:
-            self.server.close()
+        if self.server is not None:  # the application may have destroyed its node first
+            _quietly(self.server.close, "removing the interface")
         self.manager.close()
         self.clock.close()
-        self.node.destroy_node()
-        self.backend_node.destroy_node()
-        self.watch_node.destroy_node()
-        self.context.try_shutdown()
+        helpers = [self.backend_node, self.watch_node] + ([self.node] if self._owns_node else [])
+        for node in helpers:  # the application may have shut the context down first
+            _quietly(node.destroy_node, f"destroying {node.get_name()}")
+        if self._owns_node:
+            self.context.try_shutdown()
 
     def __enter__(self) -> RosRuntime:
         return self
