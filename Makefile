@@ -3,10 +3,10 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-# The system_modes_msgs interface package: built (once per source hash, cached under build/wheels/)
-# and installed into the venv by tools/ensure_system_modes_msgs.sh.
-ROS_IFACE_SRCS := $(wildcard interfaces/system_modes_msgs/*.txt interfaces/system_modes_msgs/*.toml \
-	interfaces/system_modes_msgs/*.xml interfaces/system_modes_msgs/msg/* interfaces/system_modes_msgs/srv/*)
+# The interface packages (system_modes_msgs, py_trees_ros_interfaces): built (once per source hash,
+# cached under build/wheels/) and installed into the venv by tools/ensure_interfaces.sh.
+ROS_IFACE_SRCS := $(wildcard interfaces/*/*.txt interfaces/*/*.toml interfaces/*/*.xml interfaces/*/msg/* \
+	interfaces/*/srv/* interfaces/*/action/*)
 
 # ROS 2 (rclpy) environment for every recipe: discovery on this host only, logs under build/.
 # ROS_DOMAIN_ID is chosen per run by the Python code.
@@ -15,10 +15,10 @@ export ROS_LOG_DIR := $(CURDIR)/build/ros_log
 
 .PHONY: demo test lint clean
 
-$(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_system_modes_msgs.sh
+$(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,ros]'
-	bash tools/ensure_system_modes_msgs.sh $(VENV)
+	bash tools/ensure_interfaces.sh $(VENV)
 	touch $@
 
 demo: $(STAMP)

@@ -133,6 +133,9 @@ class Platform(Protocol):
     def repair_laser(self) -> None:
         """The laser works again (``world.laser_ok``); its node no longer fails."""
 
+    def serve(self, tree: py_trees.trees.BehaviourTree) -> None:
+        """Make ``tree`` visible to the platform's tools (on ROS: py_trees_ros snapshot streams)."""
+
     def close(self) -> None:
         """Release what the platform started; idempotent."""
 
@@ -167,6 +170,9 @@ class SimulatedPlatform:
 
     def repair_laser(self) -> None:
         self.laser.repair()
+
+    def serve(self, tree: py_trees.trees.BehaviourTree) -> None:
+        pass  # no tools to serve without ROS
 
     def close(self) -> None:
         pass  # nothing runs in the background; the manager stays readable after the run
@@ -217,6 +223,7 @@ class Demo:
             self.snapshot = py_trees.visitors.SnapshotVisitor()
             self.tree.add_visitor(self.snapshot)
             self.tree.setup(manager=self.manager, world=self.world)
+            self.platform.serve(self.tree)
             # Times from the start: a wall clock's raw (monotonic) reading means nothing to a reader.
             self.monitor = Monitor(self.manager, self.console, epoch=self.clock.now())
             self.story = Story()

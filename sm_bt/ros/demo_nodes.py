@@ -18,11 +18,14 @@ from contextlib import ExitStack, contextmanager
 from types import FrameType
 from typing import Any
 
+import py_trees
+
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.ros.environment import prepare, require_ros
 from sm_bt.ros.node_process import NodesError, NodesProcess
 from sm_bt.ros.runtime import MANAGER_NODE_NAME, RosRuntime
+from sm_bt.ros.snapshot_streams import SnapshotStreams
 from sm_bt.sim.world import World
 
 DISCOVERY_TIMEOUT = 15.0  # until the manager reaches every node
@@ -72,6 +75,7 @@ class RosPlatform:
         self.tick = tick
         self._say = say or (lambda text: None)
         self._closed = False
+        self._streams: SnapshotStreams | None = None
         with ExitStack() as stack:
             stack.enter_context(_sigterm_as_interrupt())
             # The child inherits the environment: local discovery, and a domain id of this run's own
@@ -144,9 +148,19 @@ class RosPlatform:
         self.set_parameters(self.laser, {BROKEN: False})
         self.world.laser_ok = True
 
+    def serve(self, tree: py_trees.trees.BehaviourTree) -> None:
+        """Serve ``tree``'s snapshot streams on the manager's node (py-trees-tree-watcher)."""
+        from sm_bt.ros.snapshot_streams import SnapshotStreams
+
+        self._streams = SnapshotStreams(self.runtime.node, tree)
+        self._say(f"tree snapshot streams on {self.runtime.node.get_fully_qualified_name()}/snapshot_streams "
+                  "(py-trees-tree-watcher)")
+
     def close(self) -> None:
         """Close the runtime, then stop the node process (SIGINT, then SIGKILL); idempotent."""
         if self._closed:
             return
         self._closed = True
+        if self._streams is not None:
+            self._streams.close()
         self._stop.close()

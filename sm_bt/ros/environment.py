@@ -13,7 +13,7 @@ import tempfile
 
 #: What to install when rclpy or the interface package is missing.
 INSTALL_HINT = ("install the ROS 2 extra: `pip install -c constraints.txt -e '.[ros]'` then "
-                "`tools/ensure_system_modes_msgs.sh`, or simply `make test` / `make demo` from the repository")
+                "`tools/ensure_interfaces.sh`, or simply `make test` / `make demo` from the repository")
 
 
 class RosUnavailable(RuntimeError):

@@ -41,10 +41,10 @@ import py_trees
 from py_trees.common import Status
 
 from sm_bt.behaviours.manager_access import attach_manager
-from sm_bt.behaviours.visitors import FeedbackSnapshotVisitor
 from sm_bt.engine.events import Event, EventKind
 from sm_bt.model.errors import ModelError
 from sm_bt.model.types import Model, SystemPart
+from sm_bt.ros.snapshot_streams import SnapshotStreams
 
 log = logging.getLogger("sm_bt.ros.host")
 
@@ -84,9 +84,8 @@ class MissionHost:
             self._thread = threading.Thread(target=self._spin, name="sm_bt-mission-spin", daemon=True)
             self._thread.start()
         self.tree = py_trees.trees.BehaviourTree(attach_manager(root, self.manager))
-        self.snapshot = FeedbackSnapshotVisitor()
-        self.tree.add_visitor(self.snapshot)
         self.tree.setup(**(setup or {}))
+        self.streams = SnapshotStreams(node, self.tree)
         self._subscription = self.manager.subscribe(self._on_event, kinds=(EventKind.ACTUAL,))
         self._stop = threading.Event()
 
@@ -136,6 +135,7 @@ class MissionHost:
         """Shut the tree down (every behaviour's ``shutdown``), then the runtime, then the spin
         thread; the node and its context are the caller's."""
         self._subscription.cancel()
+        self.streams.close()
         self.tree.shutdown()
         self.tree.interrupt()
         self.runtime.close()

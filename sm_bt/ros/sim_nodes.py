@@ -49,6 +49,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
+from sm_bt.arguments import non_negative
 from sm_bt.cli import CliError, load
 from sm_bt.model.errors import ModelError
 from sm_bt.model.types import Model, NodePart, ParamValue
@@ -128,7 +129,7 @@ def _rejection(node: Node, parameters: Sequence[Parameter]) -> str | None:
 class SimulatedNode(LifecycleNode):
     """A model node as an rclpy lifecycle node, with the ``sim.*`` fault parameters (module doc)."""
 
-    def __init__(self, part: NodePart, *, context: Context | None = None) -> None:
+    def __init__(self, part: NodePart, *, context: Context | None = None, transition_delay: float = 0.0) -> None:
         namespace, name = split_name(part.name)
         super().__init__(name, namespace=namespace, context=context)
         self.part = part
@@ -138,7 +139,7 @@ class SimulatedNode(LifecycleNode):
         # transition, so sim.fail_next does not apply and on_deactivate reports the error.
         self._failing = False
         declare_model_parameters(self, part)
-        self.declare_parameter(TRANSITION_DELAY, 0.0, ParameterDescriptor(
+        self.declare_parameter(TRANSITION_DELAY, float(transition_delay), ParameterDescriptor(
             description="seconds every transition callback takes"))
         self.declare_parameter(FAIL_NEXT, "", ParameterDescriptor(
             description="'<transition>[:failure|:error]': the next requested one fails; used once"))
@@ -312,13 +313,15 @@ def run_nodes(
     *,
     initial_state: str = "unconfigured",
     parameters_only: Collection[str] = (),
+    transition_delay: float = 0.0,
     ready: Callable[[list[str]], None] | None = print_ready,
     stop: threading.Event | None = None,
 ) -> None:
     """Run the model's nodes (``names``, default all) in this process until ``stop`` is set.
 
     The lifecycle nodes are first brought to ``initial_state``; ``ready`` then gets their fully
-    qualified names (lifecycle first, then plain). Without ``stop``, SIGINT and SIGTERM end the
+    qualified names (lifecycle first, then plain); ``transition_delay`` is every lifecycle node's
+    first ``sim.transition_delay``. Without ``stop``, SIGINT and SIGTERM end the
     run (this needs the main thread). Shutdown order: executor, its thread, the nodes, the context.
     ``ValueError`` for unknown names or states.
     """
@@ -339,7 +342,8 @@ def run_nodes(
     spinner: threading.Thread | None = None
     failure: list[BaseException] = []
     try:
-        lifecycle = [SimulatedNode(part, context=context) for part in lifecycle_parts]
+        lifecycle = [SimulatedNode(part, context=context, transition_delay=transition_delay)
+                     for part in lifecycle_parts]
         nodes.extend(lifecycle)
         nodes.extend(SimulatedParameterNode(part, context=context) for part in plain_parts)
         for managed in lifecycle:
@@ -417,6 +421,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="bring the lifecycle nodes to this state before READY")
     parser.add_argument("--parameters-only", type=_names, default=[], metavar="NAME,...",
                         help="run these nodes as plain nodes: parameters, no lifecycle services")
+    parser.add_argument("--transition-delay", type=non_negative, default=0.0, metavar="SECONDS",
+                        help="seconds every transition takes (the nodes' first sim.transition_delay; default 0)")
     args = parser.parse_args(argv)
     environment.prepare()
     try:
@@ -433,7 +439,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{PROG}: error: {error}", file=sys.stderr)
         return 2
     try:
-        run_nodes(model, args.only, initial_state=args.state, parameters_only=args.parameters_only)
+        run_nodes(model, args.only, initial_state=args.state, parameters_only=args.parameters_only,
+                  transition_delay=args.transition_delay)
     except (NameValidationException, ParameterException) as error:  # a part or parameter name ROS refuses
         print(f"{PROG}: error: {args.model}: {error}", file=sys.stderr)
         return 2
