@@ -11,18 +11,24 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 import os
 import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
+from py_trees_ros_interfaces.msg import BehaviourTree
+from py_trees_ros_interfaces.srv import OpenSnapshotStream
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rich.console import Console
-from ros_processes import Starter
+from ros_processes import RosContext, Starter
 from tree_helpers import PILOT_DEMO_STORY, assert_in_order
 
 from sm_bt.cli import main
@@ -41,12 +47,65 @@ def run_demo(**options: object) -> tuple[int, str, Demo]:
     return code, out.getvalue(), demo
 
 
+class _TreeWatcher:
+    """A plain rclpy client (rclpy and the interface types only, as py-trees-tree-watcher): finds
+    the tree's OpenSnapshotStream service by type, opens a stream with blackboard data, keeps
+    every snapshot."""
+
+    def __init__(self) -> None:
+        self.snapshots: list[Any] = []
+        self.error: BaseException | None = None
+        self._stop = threading.Event()
+        # rclpy and the types are imported and the context made here: two threads importing
+        # rclpy at once deadlock on its module lock.
+        self._ros = RosContext("demo_tree_watcher")
+        self._thread = threading.Thread(target=self._run, name="tree-watcher", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        ros = self._ros
+        try:
+            wanted = "py_trees_ros_interfaces/srv/OpenSnapshotStream"
+            deadline = time.monotonic() + 30.0
+            while not (found := [n for n, types in ros.node.get_service_names_and_types() if wanted in types]):
+                if self._stop.wait(0.05) or time.monotonic() > deadline:
+                    return
+            request = OpenSnapshotStream.Request()
+            request.parameters.snapshot_period = math.inf
+            request.parameters.blackboard_data = True
+            topic = ros.call(OpenSnapshotStream, found[0], request).topic_name
+            latched = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            ros.node.create_subscription(BehaviourTree, topic, self.snapshots.append, latched)
+            self._stop.wait()
+        except BaseException as error:  # reported by the test, not lost in the thread
+            self.error = error
+        finally:
+            ros.close()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(10.0)
+
+
 @pytest.fixture(scope="module")
 def ros_demo() -> Iterator[tuple[int, str, Demo, float]]:
     """One patrol cycle on ROS (shared by the tests that only read its outcome), and its wall time."""
     started = time.monotonic()
     code, text, demo = run_demo(ros=True, speed=SPEED, cycles=1)
     yield code, text, demo, time.monotonic() - started
+
+
+@pytest.fixture(scope="module")
+def watched_ros_demo() -> Iterator[tuple[int, str, list[Any]]]:
+    """A ROS demo run with a plain tree watcher reading its snapshot stream meanwhile."""
+    watcher = _TreeWatcher()
+    try:
+        code, text, _ = run_demo(ros=True, speed=SPEED, cycles=1, laser_failure_at=5.0)
+    finally:
+        watcher.stop()
+    assert watcher.error is None, watcher.error
+    yield code, text, watcher.snapshots
 
 
 def pilot_modes(demo: Demo) -> list[str]:
@@ -138,6 +197,23 @@ def _stop(pid: int | None) -> None:
         time.sleep(0.05)
     with contextlib.suppress(ProcessLookupError):
         os.kill(pid, signal.SIGKILL)
+
+
+def test_the_ros_demo_serves_its_tree_to_the_tree_watcher(watched_ros_demo: tuple[int, str, list[Any]]) -> None:
+    code, text, snapshots = watched_ros_demo
+    assert code == 0, text
+    assert len(snapshots) > 10, "a snapshot for every change of the tree"
+    names = {behaviour.name for snapshot in snapshots for behaviour in snapshot.behaviours}
+    assert {"Pilot", "Contingencies", "Laser lost", "f_degraded_mode on divergence", "Energy saving"} <= names
+    switched = [b for s in snapshots for b in s.behaviours if b.name == "f_degraded_mode on divergence"]
+    # A viewer gets the latest snapshot (latched, depth 1), not necessarily each one: the SUCCESS
+    # tick may be overtaken, but the confirmed change stays in the behaviour's feedback.
+    outcomes = sorted({(b.status, b.additional_detail, b.message) for b in switched})
+    assert {detail for _, detail, _ in outcomes} == {"pilot f_degraded_mode"}
+    assert any(message.startswith("pilot is active.f_degraded_mode") for _, _, message in outcomes), outcomes
+    pilot = {kv.value for s in snapshots for kv in s.blackboard_on_visited_path if kv.key == "/system_modes/pilot"}
+    told = [value for value in pilot if re.fullmatch(r"active\.(f_\w+) \(target active\.\1\)", value)]
+    assert len(told) >= 2, pilot  # the part's whole story in one line, through the mission's modes
 
 
 def test_ros_demo_needs_a_speed() -> None:

@@ -72,6 +72,10 @@ MISTAKES = {
     "hold of two children": ('<HoldMode name="H" part="pilot" mode="f_slow_mode"><Success/><Success/></HoldMode>',
                              "HoldMode holds its mode while exactly one child runs, not 2"),
     "bad port": ('<OnDivergence part="pilot" divergnce="{fault}"/>', "<OnDivergence> has no attribute 'divergnce'"),
+    "malformed reference": ('<ChangeMode part="pilot" mode="f_slow_mode}"/>',
+                            "mode='f_slow_mode}': a blackboard reference is a whole value, {key}"),
+    "malformed port reference": ('<OnDivergence part="pilot" divergence="x{fault}"/>',
+                                 "divergence='x{fault}': a blackboard reference is a whole value"),
     "bad parallel policy": ('<Parallel policy="success_on_selected"><Success/></Parallel>',
                             "policy must be one of success_on_all, success_on_one"),
 }
@@ -201,8 +205,10 @@ def test_a_mangled_pilot_xml_loads_or_is_an_error_never_a_crash(data: st.DataObj
     text = bytearray(pilot.XML.read_bytes())
     for _ in range(data.draw(st.integers(1, 4))):
         at = data.draw(st.integers(0, len(text) - 1))
-        action = data.draw(st.sampled_from(["flip", "drop", "cut", "dup"]))
-        if action == "flip":
+        action = data.draw(st.sampled_from(["flip", "drop", "cut", "dup", "insert"]))
+        if action == "insert":  # the characters XML and py_trees' references care about
+            text[at:at] = data.draw(st.sampled_from([b"{", b"}", b"{x}", b"{}", b'"', b"<", b"&", b"/>"]))
+        elif action == "flip":
             text[at] = data.draw(st.integers(0, 255))
         elif action == "drop":
             del text[at:at + data.draw(st.integers(1, 40))]
@@ -220,3 +226,14 @@ def test_a_mangled_pilot_xml_loads_or_is_an_error_never_a_crash(data: st.DataObj
         except TreeFileError as error:
             assert error.issues and all(issue.line >= 0 for issue in error.issues)
             assert all(str(issue).startswith(str(path)) for issue in error.issues)
+
+
+def test_regression_a_cut_reference_in_a_decorator_is_an_error_not_a_crash(tmp_path: Path) -> None:
+    """Found by the fuzz test: four bytes dropped from trees/pilot.xml left num_success="les}",
+    which py_trees' parser raised ValueError on."""
+    text = pilot.XML.read_bytes()
+    at = text.index(b"{cycles}")
+    path = tmp_path / "cut.xml"
+    path.write_bytes(text[:at] + text[at + 4:])
+    errors = _errors(path)
+    assert errors == [f"{path}:22: error: num_success='les}}': a blackboard reference is a whole value, {{key}}"]

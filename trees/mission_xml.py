@@ -33,6 +33,7 @@ from __future__ import annotations
 import difflib
 import inspect
 import os
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -51,6 +52,7 @@ from sm_bt.behaviours.manager_access import ManagerBehaviour, attach_manager
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model
 
+_REFERENCE = re.compile(r"\{[^{}]+\}")
 #: Deeper than this is refused (py_trees' builder recurses once per level).
 MAX_DEPTH = 100
 _COMPOSITES = {"sequence", "selector", "fallback", "parallel"}
@@ -282,7 +284,18 @@ class _Reader:
 
     # -- checking -----------------------------------------------------------------------------------
 
+    def _references(self, element: ET.Element) -> bool:
+        """Every ``{...}`` in the element's attributes is a whole ``{key}`` value (py_trees raises on
+        any other use of braces)."""
+        ok = True
+        for key, value in element.attrib.items():
+            if key != "name" and ("{" in value or "}" in value) and not _REFERENCE.fullmatch(value):
+                self._issue(element, f"{key}={value!r}: a blackboard reference is a whole value, {{key}}")
+                ok = False
+        return ok
+
     def _check_tree_element(self, tree: ET.Element) -> None:
+        self._references(tree)
         children = list(tree)
         if len(children) != 1:
             self._issue(tree, f"<BehaviorTree ID={tree.get('ID')!r}> must hold exactly one node, not {len(children)}")
@@ -296,6 +309,10 @@ class _Reader:
             element.tag = _REACTIVE[lower]
             element.set("memory", "false")
             tag, lower = element.tag, element.tag.lower()
+        if not self._references(element):
+            for child in element:  # its children may have mistakes of their own
+                self._check(child)
+            return
         if lower in ("subtree", "subtreeplus"):  # not a behaviour: its name is the subtree's namespace
             self._check_subtree(element)
             return

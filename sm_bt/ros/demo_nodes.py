@@ -161,6 +161,11 @@ class RosPlatform:
         if self._closed:
             return
         self._closed = True
-        if self._streams is not None:
-            self._streams.close()
+        try:
+            if self._streams is not None:
+                self._streams.close()
+        finally:  # the runtime and the node process stop whatever happened above
+            self._close_runtime_and_nodes()
+
+    def _close_runtime_and_nodes(self) -> None:
         self._stop.close()

@@ -134,15 +134,17 @@ class MissionHost:
     def close(self) -> None:
         """Shut the tree down (every behaviour's ``shutdown``), then the runtime, then the spin
         thread; the node and its context are the caller's."""
-        self._subscription.cancel()
-        self.streams.close()
-        self.tree.shutdown()
-        self.tree.interrupt()
-        self.runtime.close()
-        if self._executor is not None:
-            self._executor.shutdown(timeout_sec=2.0)
-        if self._thread is not None:
-            self._thread.join(3.0)
+        try:
+            self._subscription.cancel()
+            self.streams.close()
+            self.tree.shutdown()
+            self.tree.interrupt()
+        finally:  # ROS is released whatever a behaviour's shutdown did
+            self.runtime.close()
+            if self._executor is not None:
+                self._executor.shutdown(timeout_sec=2.0)
+            if self._thread is not None:
+                self._thread.join(3.0)
 
 
 def load_root(spec: str, model: Model) -> py_trees.behaviour.Behaviour:
