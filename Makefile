@@ -15,10 +15,11 @@ export ROS_LOG_DIR := $(CURDIR)/build/ros_log
 
 .PHONY: demo test lint clean
 
-$(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh
+$(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh sm_bt/view/assets.py
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,ros]'
 	bash tools/ensure_interfaces.sh $(VENV)
+	$(BIN)/python -m sm_bt.view.assets
 	touch $@
 
 demo: $(STAMP)
@@ -33,6 +34,7 @@ demo-ros: $(STAMP)
 
 test: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
+	bash tools/ensure_chromium.sh
 	$(BIN)/python -m pytest -q
 	$(MAKE) --no-print-directory lint
 

@@ -15,6 +15,7 @@ import math
 import os
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -304,6 +305,42 @@ def run_manager(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- view --------------------------------------------------------------------------------------
+
+
+def _view_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recording", metavar="FILE.jsonl", help="a run recorded with `sm-bt demo --record FILE.jsonl`")
+    parser.add_argument("--port", type=int, default=8765, help="port to serve on (default 8765; 0: any free port)")
+    parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+
+
+def run_view(args: argparse.Namespace) -> int:
+    from sm_bt.view import read_recording
+    from sm_bt.view.server import ViewServer
+
+    try:
+        frames = read_recording(args.recording)
+    except OSError as error:
+        raise CliError(f"cannot read {args.recording}: {error.strerror or error}") from None
+    except ValueError as error:
+        raise CliError(str(error)) from None
+    try:
+        server = ViewServer(args.host, args.port, frames=frames)
+    except OSError as error:
+        raise CliError(f"cannot serve on {args.host}:{args.port}: {error.strerror or error} (try --port 0)") from None
+    except RuntimeError as error:
+        raise CliError(str(error)) from None
+    print(f"{args.recording}: {len(frames)} frame(s); open {server.url} (Ctrl-C to stop)", flush=True)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()
+    return 0
+
+
 # -- the table and main ------------------------------------------------------------------------
 
 #: Every subcommand, in the order ``--help`` lists them. Add new ones here.
@@ -325,6 +362,9 @@ COMMANDS: list[Command] = [
                         "then nodes, (*) on inferred values, divergences highlighted. The model's nodes run on "
                         "the embedded simulated backend, or with --ros are the live ROS 2 nodes; --change requests "
                         "are made in turn."),
+    Command("view", "replay a recorded run in the browser (tree, modes, timeline)", _view_arguments, run_view,
+            description="Serve the page of `sm-bt demo --view` for a run recorded with --record: the tree, the "
+                        "mode table and the run's timeline, with a scrubber over every recorded tick."),
     Command("manager", "run the mode manager as a ROS 2 node (drop-in for system_modes' mode_manager)",
             manager_cli.add_arguments, run_manager,
             description="Serve /{system}/change_state, get_state, get_available_states and /{part}/change_mode, "

@@ -20,6 +20,7 @@ faster (:attr:`World.time_scale <sm_bt.sim.world.World.time_scale>`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import enum
 import sys
 import threading
@@ -48,6 +49,7 @@ from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
 from sm_bt.trees.mission_xml import TreeFileError, load_tree
 from sm_bt.trees.pilot_actions import BATTERY_OK, NavigateTo, Recharge
+from sm_bt.view import View, attach_view
 
 #: What Nav2's parameter files give the nodes before any mode is applied (the pilot's TB3 set-up).
 NAV2_PARAMETERS = {
@@ -106,6 +108,10 @@ class Options:
     tick: float = 0.1  # virtual seconds between ticks (simulated platform)
     limit: float = 1500.0  # world seconds before giving up
     ros: bool = False  # real rclpy lifecycle nodes in a child process instead of simulated ones
+    view: int | None = None  # serve the web view on this port (0: any free port)
+    view_host: str = "127.0.0.1"
+    record: str | None = None  # write the view's frames to this .jsonl file
+    linger: bool = False  # keep serving the view after the run until Ctrl-C
 
 
 class Platform(Protocol):
@@ -224,6 +230,12 @@ class Demo:
             self.tree.add_visitor(self.snapshot)
             self.tree.setup(manager=self.manager, world=self.world)
             self.platform.serve(self.tree)
+            self.view: View | None = None
+            if options.view is not None or options.record is not None:
+                self.view = attach_view(self.tree, self.manager, port=options.view, host=options.view_host,
+                                        record=options.record)
+                if self.view.url:
+                    self.say(f"view: {self.view.url}")
             # Times from the start: a wall clock's raw (monotonic) reading means nothing to a reader.
             self.monitor = Monitor(self.manager, self.console, epoch=self.clock.now())
             self.story = Story()
@@ -236,13 +248,19 @@ class Demo:
             self._started = self.clock.now()
             self._subscription = self.manager.subscribe(self._narrate)
         except BaseException:
+            if getattr(self, "view", None) is not None:
+                self.view.close()  # type: ignore[union-attr]
             self.platform.close()
             raise
 
     def close(self) -> None:
         """Stop narrating and release the platform (on ROS: the runtime and the node process)."""
         self._subscription.cancel()
-        self.platform.close()
+        try:
+            if self.view is not None:
+                self.view.close()
+        finally:
+            self.platform.close()
 
     # -- time ----------------------------------------------------------------------------------
 
@@ -400,7 +418,13 @@ class Demo:
         self.say(f"mission {self.root.status.value}")
         self.final_mode = str(self.manager.actual(pilot.SYSTEM))
         self.show()
-        return self.summary(time.monotonic() - started)
+        code = self.summary(time.monotonic() - started)
+        if self.view is not None and self.view.url and self.options.linger:
+            self.say(f"the view stays at {self.view.url} until Ctrl-C")
+            with contextlib.suppress(KeyboardInterrupt):
+                while True:
+                    time.sleep(3600)
+        return code
 
     def expected_mode(self) -> str:
         """Degraded while the laser is broken, normal otherwise."""
@@ -456,6 +480,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="world (virtual) seconds per wall second; 0 runs as fast as possible, "
                              "simulated only (default 25)")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
+    parser.add_argument("--view", type=_port, nargs="?", const=8765, default=None, metavar="PORT",
+                        help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "
+                             "(default port 8765; 0: any free port); it stays until Ctrl-C after the run")
+    parser.add_argument("--view-host", default="127.0.0.1", metavar="HOST",
+                        help="address the view listens on (default 127.0.0.1: this machine only)")
+    parser.add_argument("--record", metavar="FILE.jsonl",
+                        help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")
     parser.add_argument("--ros", action="store_true",
                         help="run on real ROS 2 lifecycle nodes (python -m sm_bt.ros.sim_nodes pilot, started "
                              "and stopped by the demo) with the manager on ROS 2, serving the system_modes "
@@ -467,6 +498,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      "world runs --speed times faster.")
 
 
+def _port(text: str) -> int:
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port {port} is not between 0 and 65535")
+    return port
+
+
 def _time(text: str) -> float | None:
     if text == "never":
         return None
@@ -475,12 +516,17 @@ def _time(text: str) -> float | None:
 
 def run(args: argparse.Namespace) -> int:
     options = Options(laser_failure_at=args.laser_failure_at, laser_repair_at=args.laser_repair_at,
-                      cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree, ros=args.ros)
+                      cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree, ros=args.ros,
+                      view=args.view, view_host=args.view_host, record=args.record, linger=args.view is not None)
     if not options.ros:
         try:
             return Demo(options).run()
         except TreeFileError as error:
             print(error, file=sys.stderr)
+            return 1
+        except OSError as error:  # the view's port
+            print(f"sm-bt demo: error: cannot serve the view on {options.view_host}:{options.view}: "
+                  f"{error.strerror or error} (choose another port: --view PORT, 0 for any)", file=sys.stderr)
             return 1
     from sm_bt.cli import PROG, CliError  # not at the top: sm_bt.cli imports this module
     from sm_bt.ros.environment import RosUnavailable

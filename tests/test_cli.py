@@ -285,3 +285,12 @@ def test_console_script() -> None:
     assert "Traceback" not in bad.stderr
     usage = subprocess.run([str(script), "bogus"], capture_output=True, text=True, timeout=60)
     assert usage.returncode == 2
+
+
+def test_view_of_a_bad_recording_says_which_line(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code, _, err = run(capsys, "view", tmp_path / "missing.jsonl")
+    assert code == 1 and err.startswith(f"sm-bt: error: cannot read {tmp_path / 'missing.jsonl'}")
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text('{"tick": 1, "tree": {}, "modes": []}\n{"oops": true}\nnot json\n')
+    code, _, err = run(capsys, "view", bad)
+    assert (code, err) == (1, f"sm-bt: error: {bad}:2: not a frame of sm-bt's view (tick, tree, modes)\n")

@@ -1,0 +1,60 @@
+"""See a mission live in a browser: the tree (py_trees_js), the modes, the run, no ROS or Qt.
+
+::
+
+    view = attach_view(tree, manager)          # a post-tick handler on a py_trees BehaviourTree
+    print("open", view.url)                    # http://127.0.0.1:<port>/
+    ... tick ...
+    view.close()
+
+``attach_view(..., record="run.jsonl")`` also writes every frame to a file, which
+``sm-bt view run.jsonl`` replays. The server listens on 127.0.0.1 unless ``host`` says otherwise.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import py_trees
+
+from sm_bt.engine.manager import ModeManager
+from sm_bt.view.frames import FrameMaker, Recorder, read_recording
+
+
+class View:
+    """A running view of one tree: ``url`` (when served), ``frames`` (the maker), ``close()``."""
+
+    def __init__(self, maker: FrameMaker, server: object | None, recorder: Recorder | None) -> None:
+        self.maker = maker
+        self.server = server
+        self.recorder = recorder
+
+    @property
+    def url(self) -> str | None:
+        return getattr(self.server, "url", None)
+
+    def close(self) -> None:
+        self.maker.close()
+        if self.recorder is not None:
+            self.recorder.close()
+        close = getattr(self.server, "close", None)
+        if close is not None:
+            close()
+
+
+def attach_view(tree: py_trees.trees.BehaviourTree, manager: ModeManager, *, port: int | None = 0,
+                host: str = "127.0.0.1", record: str | Path | None = None) -> View:
+    """Serve ``tree`` and ``manager`` live on ``host``:``port`` (0: a free port; ``None``: do not
+    serve) and/or record them to ``record`` (a ``.jsonl`` file)."""
+    from sm_bt.view.server import ViewServer
+
+    maker = FrameMaker(tree, manager)
+    server = ViewServer(host, port) if port is not None else None
+    recorder = Recorder(record) if record is not None else None
+    for sink in (server, recorder):
+        if sink is not None:
+            maker.sinks.append(sink)
+    return View(maker, server, recorder)
+
+
+__all__ = ["View", "attach_view", "read_recording"]
