@@ -20,7 +20,7 @@ import pytest
 from rich.console import Console
 
 from sm_bt.demo import Demo, Options
-from sm_bt.view import read_recording
+from sm_bt.view import View, attach_view, read_recording
 from sm_bt.view.assets import ASSETS, NEEDED, from_wheel, kept_wheel, missing
 from sm_bt.view.server import ViewServer
 
@@ -34,12 +34,13 @@ def _chromium() -> str:
 
 
 def _browse(url: str, *, screenshot: Path | None = None, live: bool = True) -> str:
-    """The DOM the page built (and a screenshot of it). Chromium's virtual time runs the page's
-    work: a replay to its end; a live page for 3 virtual seconds (its stream stays open, so a
-    real-time limit ends the wait)."""
-    wait = ["--virtual-time-budget=3000", "--timeout=20000"] if live else ["--virtual-time-budget=30000"]
+    """The DOM the page built (and a screenshot of it), once its work is done: Chromium's virtual
+    time runs the page until nothing is pending, so a live page is loaded as ``/?once`` (the run so
+    far, then its stream closes)."""
+    if live:
+        url += "?once"
     base = [_chromium(), "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-            "--window-size=1600,1000", *wait]
+            "--window-size=1600,1000", "--virtual-time-budget=30000"]
     dom = subprocess.run([*base, "--dump-dom", url], capture_output=True, text=True, timeout=90)
     assert dom.returncode == 0, dom.stderr[-2000:]
     if screenshot is not None:
@@ -51,30 +52,44 @@ def _browse(url: str, *, screenshot: Path | None = None, live: bool = True) -> s
 
 
 @pytest.fixture
-def demo_thread() -> Iterator[tuple[Demo, threading.Thread]]:
-    demo = Demo(Options(speed=8.0, cycles=1, view=0, laser_failure_at=5.0),  # ~22 s: the page loads twice meanwhile
-                Console(file=io.StringIO(), width=120))
+def demo_thread() -> Iterator[tuple[Demo, View]]:
+    """The demo running in a thread, with a view of its own (which outlives the run, so the page
+    can still be loaded when the demo is done)."""
+    demo = Demo(Options(speed=20.0, cycles=1, laser_failure_at=5.0), Console(file=io.StringIO(), width=120))
+    view = attach_view(demo.tree, demo.manager, port=0)
     runner = threading.Thread(target=demo.run, name="demo", daemon=True)
     runner.start()
-    yield demo, runner
+    yield demo, view
     runner.join(120.0)
+    view.close()
 
 
 def test_the_page_shows_the_tree_the_modes_and_a_divergence_during_the_demo(
-        demo_thread: tuple[Demo, threading.Thread]) -> None:
-    demo, _ = demo_thread
-    assert demo.view is not None and demo.view.url is not None
+        demo_thread: tuple[Demo, View]) -> None:
+    _, view = demo_thread
+    assert view.url is not None and isinstance(view.server, ViewServer)
     deadline = time.monotonic() + 60.0
     while not any(event["kind"] == "divergence" and "(fault" in event["text"]
-                  for frame in demo.view.server.history() for event in frame["events"]):  # type: ignore[union-attr]
+                  for frame in view.server.history() for event in frame["events"]):
         assert time.monotonic() < deadline, "no fault divergence in the demo's frames"
         time.sleep(0.2)
-    dom = _browse(demo.view.url, screenshot=SHOTS / "live.png")
+    dom = _browse(view.url, screenshot=SHOTS / "live.png")
     for behaviour in ("Laser lost", "f_degraded_mode on divergence", "Patrol with contingencies", "To wp_1"):
         assert behaviour in dom, behaviour  # drawn by py_trees_js
     assert '<tr data-part="pilot" class="system' in dom
     assert "active.f_" in dom.split('data-part="pilot"', 1)[1].split("</tr>", 1)[0]
     assert '<li class="divergence">' in dom and "(fault" in dom
+    assert 'data-once="true"' in dom
+
+
+def test_the_demo_serves_its_view_when_asked() -> None:
+    out = io.StringIO()
+    demo = Demo(Options(speed=0.0, cycles=1, view=0), Console(file=out, width=120))
+    assert demo.view is not None and demo.view.url is not None
+    with urllib.request.urlopen(demo.view.url, timeout=5.0) as answer:
+        assert answer.status == 200 and b"sm_bt view" in answer.read()
+    assert demo.run() == 0
+    assert f"view: {demo.view.url}" in out.getvalue()
 
 
 def test_a_recorded_run_replays_with_every_tick(tmp_path: Path) -> None:

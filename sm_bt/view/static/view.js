@@ -177,9 +177,15 @@ liveButton.addEventListener("click", function () {
 
 var source = new EventSource("/events");
 source.onmessage = function (message) { receive(JSON.parse(message.data)); };
+// /?once: the run so far, then no more updates (a page to save, or a headless browser's look).
+var once = new URLSearchParams(window.location.search).has("once");
 source.addEventListener("caught-up", function () {
   caughtUp = true;
   if (shown < 0) { showLatest(true); }
+  if (once) {
+    source.close();
+    document.body.dataset.once = "true";
+  }
 });
 source.addEventListener("end", function () {
   caughtUp = true;
