@@ -86,6 +86,7 @@ class MissionHost:
         self.tree = py_trees.trees.BehaviourTree(attach_manager(root, self.manager))
         self.tree.setup(**(setup or {}))
         self.streams = SnapshotStreams(node, self.tree)
+        self._shown: dict[str, str] = {}
         self._subscription = self.manager.subscribe(self._on_event, kinds=(EventKind.ACTUAL,))
         self._stop = threading.Event()
 
@@ -98,7 +99,10 @@ class MissionHost:
     def _on_event(self, event: Event) -> None:
         if isinstance(self.manager.model.parts[event.part], SystemPart) and event.actual is not None \
                 and event.actual.known:
-            log.info("%s is %s", event.part, event.actual)
+            shown = str(event.actual)
+            if self._shown.get(event.part) != shown:  # not again for a new reason only
+                self._shown[event.part] = shown
+                log.info("%s is %s", event.part, shown)
 
     def wait_for_nodes(self, timeout: float) -> None:
         """Until the model's nodes are reachable; :class:`HostError` naming the others."""
