@@ -294,3 +294,18 @@ def test_view_of_a_bad_recording_says_which_line(capsys: pytest.CaptureFixture[s
     bad.write_text('{"tick": 1, "tree": {}, "modes": []}\n{"oops": true}\nnot json\n')
     code, _, err = run(capsys, "view", bad)
     assert (code, err) == (1, f"sm-bt: error: {bad}:2: not a frame of sm-bt's view (tick, tree, modes)\n")
+
+
+def test_check_reports_every_file_of_a_mixed_set_and_never_an_internal_error(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    files = {"control.yaml": b"a:\x00\n", "deep.yaml": b"[" * 5000, "latin1.yaml": b"a: caf\xe9\n",
+             "alias.yaml": b"*a\n"}
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    code, out, err = run(capsys, "check", *(tmp_path / name for name in files), "pilot")
+    assert code == 1
+    assert out.splitlines()[-1] == "pilot: ok (1 system, 4 nodes)"  # checked after the bad ones
+    for name in files:
+        assert f"{tmp_path / name}: failed" in err
+        assert f"{tmp_path / name}:0:" not in err  # every error has a real line
+    assert "internal error" not in err and "Traceback" not in err

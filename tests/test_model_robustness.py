@@ -39,3 +39,70 @@ def test_mutated_fixtures_load_or_raise_model_error(path: Path) -> None:
             for issue in error.issues:
                 assert 0 <= issue.location.line <= line_count + 1, (label, str(issue))
                 assert issue.message, label
+
+
+# -- regressions of hostile and huge model files (each once a crash or a quadratic cost) ----------
+
+
+def _nested_systems(depth: int) -> str:
+    out = []
+    for index in range(depth):
+        inner = f"s{index + 1}" if index + 1 < depth else "leaf"
+        out.append(f"s{index}:\n  ros__parameters:\n    type: system\n    parts:\n      {inner}\n"
+                   f"    modes:\n      __DEFAULT__:\n        {inner}: active\n")
+    out.append("leaf:\n  ros__parameters:\n    type: node\n    modes:\n      __DEFAULT__:\n"
+               "        ros__parameters:\n          x: 1\n")
+    return "".join(out)
+
+
+def test_regression_a_thousand_systems_one_inside_the_other_load_and_run() -> None:
+    """The cycle check recursed once per level: RecursionError at about 1,000."""
+    from sm_bt.engine.manager import ModeManager
+    from sm_bt.sim import SimBackend
+
+    model = load_model_text(_nested_systems(3000), "deep.yaml")
+    assert model.ancestors("leaf")[-1] == "s0" and len(model.ancestors("leaf")) == 3000
+    backend = SimBackend(model)
+    request = ModeManager(model, backend).change_state("s0", "configure")
+    while not request.done:
+        backend.clock.advance(0.1)
+    assert request.succeeded, request.reason
+
+
+def test_regression_a_cycle_deep_in_the_hierarchy_is_still_reported_once() -> None:
+    text = _nested_systems(1500).replace("      leaf\n", "      s700\n", 1).replace("        leaf: active\n",
+                                                                                  "        s700: active\n", 1)
+    with pytest.raises(ModelError) as raised:
+        load_model_text(text, "cycle.yaml")
+    cycles = [issue for issue in raised.value.issues if "contains itself" in issue.message]
+    assert len(cycles) == 1
+    assert cycles[0].message.startswith("system 's700' contains itself through its parts: s700 -> s701 -> s702 -> "
+                                        "s703 -> ... 795 more ... -> s1499 -> s700: remove one of these parts")
+
+
+def test_regression_a_thousand_identical_modes_are_one_warning() -> None:
+    """Every pair was compared and warned about: 500,500 warnings and seconds for 1,000 modes."""
+    modes = "".join(f"      M{index}:\n        ros__parameters:\n          x: 1\n" for index in range(1000))
+    text = ("n:\n  ros__parameters:\n    type: node\n    modes:\n      __DEFAULT__:\n        ros__parameters:\n"
+            "          x: 1\n" + modes)
+    (warning,) = load_model_text(text, "same.yaml").warnings
+    assert warning.location.line == 8  # the second of the group
+    assert warning.message.startswith("node 'n': modes '__DEFAULT__', 'M0', 'M1', 'M2' and 997 more have the same "
+                                      "parameter values (x=1)")
+
+
+def test_regression_a_file_that_is_not_utf8_names_the_line_and_column(tmp_path: Path) -> None:
+    from sm_bt.model import load_model
+
+    path = tmp_path / "latin1.yaml"
+    path.write_bytes(b"a:\n  ros__parameters:\n    type: node\n    # caf\xe9\n")
+    with pytest.raises(ModelError) as raised:
+        load_model(path)
+    assert str(raised.value) == f"{path}:4: error: byte 0xe9 at column 10 is not UTF-8: save the file as UTF-8 text"
+
+
+@pytest.mark.parametrize("text", ["*a\n", "&a x\n", "--- *a\n"])
+def test_regression_alias_and_anchor_only_documents_name_line_one(text: str) -> None:
+    with pytest.raises(ModelError) as raised:
+        load_model_text(text, "a.yaml")
+    assert raised.value.issues and all(issue.location.line >= 1 for issue in raised.value.issues)

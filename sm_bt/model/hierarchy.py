@@ -2,34 +2,48 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 
 from sm_bt.model.diagnostics import Diagnostics
 
 
 def report_cycles(children: Mapping[str, tuple[str, ...]], lines: Mapping[str, int], diag: Diagnostics) -> bool:
-    """Report each cycle once (``a -> b -> a``); True when there is none."""
+    """Report each cycle once (``a -> b -> a``); True when there is none.
+
+    Depth first with a stack of its own, not recursion: a legal hierarchy may be nested deeper
+    than Python's recursion limit (1,000 systems one inside the other load)."""
     done: set[str] = set()
     seen_cycles: set[frozenset[str]] = set()
-
-    def visit(name: str, path: list[str]) -> None:
-        if name in path:
-            cycle = [*path[path.index(name):], name]
-            if frozenset(cycle) not in seen_cycles:
-                seen_cycles.add(frozenset(cycle))
-                shown = " -> ".join(cycle)
-                what = "contains itself" if len(cycle) == 2 else "contains itself through its parts"
-                diag.error(lines.get(name, 0), f"system {name!r} {what}: {shown}: remove one of these "
-                                               "parts so that the hierarchy is a tree")
-            return
-        if name in done:
-            return
-        for child in children.get(name, ()):
-            visit(child, [*path, name])
-        done.add(name)
-
-    for name in children:
-        visit(name, [])
+    for root in children:
+        if root in done:
+            continue
+        path = [root]
+        on_path = {root: 0}
+        stack: list[tuple[str, Iterator[str]]] = [(root, iter(children.get(root, ())))]
+        while stack:
+            name, remaining = stack[-1]
+            child = next(remaining, None)
+            if child is None:
+                stack.pop()
+                path.pop()
+                del on_path[name]
+                done.add(name)
+                continue
+            if child in on_path:
+                cycle = [*path[on_path[child]:], child]
+                if frozenset(cycle) not in seen_cycles:
+                    seen_cycles.add(frozenset(cycle))
+                    shown = " -> ".join(cycle if len(cycle) <= 8 else
+                                        [*cycle[:4], f"... {len(cycle) - 6} more ...", *cycle[-2:]])
+                    what = "contains itself" if len(cycle) == 2 else "contains itself through its parts"
+                    diag.error(lines.get(child, 0), f"system {child!r} {what}: {shown}: remove one of these "
+                                                    "parts so that the hierarchy is a tree")
+                continue
+            if child in done:
+                continue
+            on_path[child] = len(path)
+            path.append(child)
+            stack.append((child, iter(children.get(child, ()))))
     return not seen_cycles
 
 

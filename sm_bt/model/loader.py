@@ -89,13 +89,19 @@ def load_model(path: str | os.PathLike[str], *, strict: bool = True) -> Model:
     """Load the model file at ``path``; raise :class:`ModelError` with every problem found."""
     filename = os.fspath(path)
     try:
-        with open(filename, encoding="utf-8") as stream:
-            text = stream.read()
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        with open(filename, "rb") as stream:
+            data = stream.read()
+    except OSError as exc:
         raise ModelError([ModelIssue(Location(filename, 0), Severity.ERROR,
-                                     f"cannot read the model file: {reason}: check the path and that it "
-                                     "is a UTF-8 text file")]) from None
+                                     f"cannot read the model file: {exc.strerror or exc}: check the path")]) from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:  # where the bad byte is: the line and column a user can find
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise ModelError([ModelIssue(Location(filename, line), Severity.ERROR,
+                                     f"byte 0x{data[exc.start]:02x} at column {column} is not UTF-8: save the "
+                                     "file as UTF-8 text")]) from None
     return load_model_text(text, filename, strict=strict)
 
 

@@ -141,6 +141,11 @@ def may_both_match(first: ParamSpec, second: ParamSpec) -> bool:
     return max(first_range[0], second_range[0]) <= min(first_range[1], second_range[1])
 
 
+def compared_exactly(spec: ParamSpec) -> bool:
+    """True when ``spec`` accepts its own value only (no tolerance, minimum or maximum)."""
+    return _accepted_range(spec) is None
+
+
 def _accepted_range(spec: ParamSpec) -> tuple[float, float] | None:
     """The closed interval a numeric spec accepts, or ``None`` for an exact comparison."""
     match = spec.match

@@ -15,6 +15,7 @@ from sm_bt.model.diagnostics import Diagnostics
 from sm_bt.model.match_specs import (
     MatchEntry,
     check_parameters,
+    compared_exactly,
     may_both_match,
     read_match_map,
     value_outside,
@@ -150,18 +151,35 @@ def _type_fix(value: ParamValue, wanted: ParamValue) -> str:
 
 
 def _warn_ambiguous(node: str, modes: dict[str, NodeMode], diag: Diagnostics) -> None:
+    """Warn once per set of modes that inference cannot tell apart. Modes compared exactly are
+    grouped by their values (linear in the number of modes); a mode with a match range is
+    compared with each other mode (few modes have ranges)."""
     ordered = list(modes.values())
+    exact = [all(compared_exactly(spec) for spec in mode.parameters.values()) for mode in ordered]
+    groups: dict[tuple[tuple[str, str, ParamValue], ...], list[NodeMode]] = {}
+    for mode, is_exact in zip(ordered, exact, strict=True):
+        if is_exact:
+            key = tuple(sorted((name, type(spec.value).__name__, spec.value) for name, spec in mode.parameters.items()))
+            groups.setdefault(key, []).append(mode)
+    for group in groups.values():
+        if len(group) > 1:
+            quoted = [repr(mode.name) for mode in group[:4]]
+            names = (", ".join(quoted) + f" and {len(group) - 4} more" if len(group) > 4
+                     else ", ".join(quoted[:-1]) + f" and {quoted[-1]}")
+            diag.warning(group[1].location.line, f"node {node!r}: modes {names} have the same parameter values"
+                                                 f"{_shown(group[1])}, so inference cannot tell them apart (the "
+                                                 "target, then the default mode decides): change a value or a "
+                                                 "match range if they must be told apart")
     for index, later in enumerate(ordered):
-        for earlier in ordered[:index]:
+        for position, earlier in enumerate(ordered[:index]):
+            if exact[index] and exact[position]:
+                continue  # grouped above
             names = list(earlier.parameters)
             if all(may_both_match(earlier.parameters[n], later.parameters[n]) for n in names):
-                ranges = any(later.parameters[n].match != EXACT or earlier.parameters[n].match != EXACT
-                             for n in names)
-                how = "accept overlapping values" if ranges else f"have the same parameter values{_shown(later)}"
                 diag.warning(later.location.line, f"node {node!r}: modes {earlier.name!r} and {later.name!r} "
-                                                  f"{how}, so inference cannot tell them apart (the target, "
-                                                  "then the default mode decides): change a value or a "
-                                                  "match range if they must be told apart")
+                                                  "accept overlapping values, so inference cannot tell them "
+                                                  "apart (the target, then the default mode decides): change a "
+                                                  "value or a match range if they must be told apart")
 
 
 def _shown(mode: NodeMode) -> str:

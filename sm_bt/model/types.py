@@ -288,11 +288,28 @@ class Model:
             if current not in order:
                 order.append(current)
                 frontier.extend(self.parents(current))
-        return tuple(sorted(order, key=self.height))
+        heights = self._heights(order)
+        return tuple(sorted(order, key=heights.__getitem__))
 
     def height(self, name: str) -> int:
         """0 for a node, 1 + the tallest part for a system: sorting by it gives bottom-up order."""
-        part = self.parts[name]
-        if isinstance(part, NodePart) or not part.parts:
-            return 0
-        return 1 + max(self.height(child) for child in part.parts)
+        return self._heights([name])[name]
+
+    def _heights(self, names: list[str]) -> dict[str, int]:
+        """The height of each of ``names`` and of every part below them, without recursion (a
+        hierarchy may be deeper than Python's recursion limit)."""
+        heights: dict[str, int] = {}
+        for start in names:
+            stack = [(start, False)]
+            while stack:
+                current, expanded = stack.pop()
+                if current in heights:
+                    continue
+                part = self.parts[current]
+                children = () if isinstance(part, NodePart) else part.parts
+                if not expanded and any(child not in heights for child in children):
+                    stack.append((current, True))
+                    stack.extend((child, False) for child in children if child not in heights)
+                    continue
+                heights[current] = 1 + max(heights.get(child, 0) for child in children) if children else 0
+        return heights
