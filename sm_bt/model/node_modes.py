@@ -174,8 +174,7 @@ def _warn_ambiguous(node: str, modes: dict[str, NodeMode], diag: Diagnostics) ->
         for position, earlier in enumerate(ordered[:index]):
             if exact[index] and exact[position]:
                 continue  # grouped above
-            names = list(earlier.parameters)
-            if all(may_both_match(earlier.parameters[n], later.parameters[n]) for n in names):
+            if all(may_both_match(spec, later.parameters[name]) for name, spec in earlier.parameters.items()):
                 diag.warning(later.location.line, f"node {node!r}: modes {earlier.name!r} and {later.name!r} "
                                                   "accept overlapping values, so inference cannot tell them "
                                                   "apart (the target, then the default mode decides): change a "
