@@ -16,8 +16,10 @@ export ROS_LOG_DIR := $(CURDIR)/build/ros_log
 .PHONY: demo test lint clean
 
 $(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh sm_bt/view/assets.py
+	@echo "sm_bt: creating $(VENV) and installing the pinned dependencies (ROS 2 Jazzy wheels included; about a minute the first time) ..."
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,ros]'
+	@echo "sm_bt: dependencies installed; now the interface packages (built once, then cached)"
 	bash tools/ensure_interfaces.sh $(VENV)
 	$(BIN)/python -m sm_bt.view.assets
 	touch $@
@@ -38,13 +40,14 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 	$(MAKE) --no-print-directory lint
 
-# The manager's property tests (tests/test_manager_properties.py) with the hypothesis `stress`
-# profile: at least 10,000 scenarios, then a summary (requests by outcome, recoveries, rules, ...).
+# The manager's property tests (tests/test_manager_properties.py) and the loader's fuzz tests
+# (tests/test_model_fuzz.py) with the hypothesis `stress` profile: at least 10,000 scenarios and
+# 100,000 model files, then a summary (requests by outcome, recoveries, rules, files by outcome).
 .PHONY: stress
 stress: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
 	SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests $(BIN)/python -m pytest -q -p stress_summary \
-		tests/test_manager_properties.py
+		tests/test_manager_properties.py tests/test_model_fuzz.py
 
 # The performance goals (README, "Performance"): a table with each goal, build/bench/results.json
 # and build/bench/scaling.png; exit status 1 if a goal is not met. About 10 minutes on 2 cores.

@@ -9,12 +9,13 @@ and :class:`Monitor` keeps either up to date from the manager's events.
 
 from __future__ import annotations
 
+import io
 import json
-import os
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, TextIO
+from typing import Any, TextIO, cast
 
 from rich import box
 from rich.console import Console
@@ -113,13 +114,40 @@ def render_text(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
-def terminal_console(width_when_piped: int = 120) -> Console:
-    """A console for the terminal; for pipes and files (where rich assumes 80 columns) one wide
-    enough for the table, unless ``COLUMNS`` says otherwise."""
-    console = Console(highlight=False)
-    if not console.is_terminal and "COLUMNS" not in os.environ:
-        console = Console(highlight=False, width=width_when_piped)
-    return console
+#: Wide enough that rich never wraps a line of ours when writing to a pipe or a file.
+PLAIN_WIDTH = 10_000
+
+
+class _StripTrailingSpace(io.TextIOBase):
+    """Passes text on with the spaces that end each line removed (rich pads table cells)."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self.stream = stream
+        self.pending = ""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        *lines, self.pending = (self.pending + text).split("\n")
+        for line in lines:
+            self.stream.write(line.rstrip(" ") + "\n")
+        return len(text)
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
+def terminal_console(stream: TextIO | None = None) -> Console:
+    """A console for ``stream`` (stdout). On a terminal, rich's own (its width, colour unless
+    ``NO_COLOR`` is set). On a pipe or a file, plain text a program or a person can read: no
+    colour or other escape codes, lines never wrapped, no trailing spaces."""
+    stream = sys.stdout if stream is None else stream
+    console = Console(file=stream, highlight=False)
+    if console.is_terminal:
+        return console
+    return Console(file=cast(TextIO, _StripTrailingSpace(stream)), highlight=False, width=PLAIN_WIDTH, no_color=True,
+                   color_system=None, force_terminal=False, soft_wrap=True)
 
 
 def row_style(row: Row) -> str | None:
@@ -164,16 +192,18 @@ def render_rich(rows: list[Row], *, title: str | None = None) -> Table:
     return table
 
 
-def to_json(rows: list[Row], time: float) -> JsonSnapshot:
-    """A JSON-serialisable snapshot at clock ``time``: raw values (``null`` when absent), inferred
-    flags, and the divergence (``null`` when on target). Times are rounded to the microsecond."""
-    return {"time": round(time, 6), "parts": [_json_row(row) for row in rows]}
+def to_json(rows: list[Row], now: float, epoch: float = 0.0) -> JsonSnapshot:
+    """A JSON-serialisable snapshot at clock time ``now``: raw values (``null`` when absent),
+    inferred flags, and the divergence (``null`` when on target). Every time in it (``time``, a
+    divergence's ``since``) is in seconds since ``epoch``, the start of the run, on the manager's
+    clock (virtual seconds on simulated nodes), rounded to the microsecond."""
+    return {"time": round(now - epoch, 6), "parts": [_json_row(row, epoch) for row in rows]}
 
 
-def _json_row(row: Row) -> dict[str, Any]:
+def _json_row(row: Row, epoch: float) -> dict[str, Any]:
     divergence = None
     if row.cause is not None:
-        since = None if row.since is None else round(row.since, 6)
+        since = None if row.since is None else round(row.since - epoch, 6)
         divergence = {"cause": row.cause.value, "since": since, "error": row.error}
     return {
         "part": row.part,
@@ -277,5 +307,5 @@ class Monitor:
             else:
                 self.output.print(self.table(rows))
         else:
-            self.output.write(json.dumps(to_json(rows, self.manager.clock.now() - self.epoch)) + "\n")
+            self.output.write(json.dumps(to_json(rows, self.manager.clock.now(), self.epoch)) + "\n")
             self.output.flush()

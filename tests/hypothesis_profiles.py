@@ -43,8 +43,9 @@ PROFILE = os.environ.get(PROFILE_VARIABLE, "default")
 settings.load_profile(PROFILE)
 
 
-def examples(default: int) -> settings:
+def examples(default: int, *, stress: int | None = None) -> settings:
     """Settings for a property test that runs ``default`` examples in the default profile and
-    ``STRESS_FACTOR`` times as many in the stress profile."""
-    factor = STRESS_FACTOR if PROFILE == "stress" else 1
-    return settings(max_examples=default * factor)
+    ``stress`` (default: ``STRESS_FACTOR`` times as many) in the stress profile."""
+    if PROFILE != "stress":
+        return settings(max_examples=default)
+    return settings(max_examples=stress if stress is not None else default * STRESS_FACTOR)

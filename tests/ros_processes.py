@@ -10,14 +10,17 @@ in a background thread and waits on futures with events (never ``spin_until_futu
 from __future__ import annotations
 
 import atexit
+import collections
 import contextlib
 import os
+import re
+import sys
 import threading
 import time
 import weakref
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import pytest
 
@@ -238,3 +241,84 @@ def wait_until(condition: Callable[[], bool], timeout: float, message: str, poll
             raise AssertionError(f"{message} (after {timeout} s)")
         time.sleep(poll)
     return time.monotonic() - start
+
+
+#: A log line in ROS 2's console format: ``[SEVERITY] [seconds.micro] [logger]: message`` (rclpy's
+#: own lines have nanoseconds).
+LOG_LINE = re.compile(r"^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[\d+\.\d{6}(?:\d{3})?\] \[([\w.]+)\]: (.*)$")
+
+
+# -- the manager's process -----------------------------------------------------------------------------
+
+
+class ManagerProcess(NodeProcess):
+    """``python -m sm_bt.cli manager MODEL ARGS...``: ready once it says what it serves; stopped by
+    PID like every ROS process of the tests (SIGINT, then SIGKILL); its stderr is kept whole."""
+
+    def __init__(self, model: str, *args: str) -> None:
+        super().__init__(model)
+        self.command = [sys.executable, "-m", "sm_bt.cli", "manager", model, *args]
+        self._stderr = collections.deque(maxlen=20_000)
+        self._starter: threading.Thread | None = None
+        self._failure: BaseException | None = None
+
+    def launch(self) -> ManagerProcess:
+        """:meth:`start` in a background thread, so that the node processes start meanwhile;
+        :meth:`ready` waits for it."""
+
+        def run() -> None:
+            try:
+                self.start()
+            except BaseException as failure:  # re-raised by ready()
+                self._failure = failure
+
+        self._starter = threading.Thread(target=run, name="manager-start", daemon=True)
+        self._starter.start()
+        return self
+
+    def ready(self) -> ManagerProcess:
+        """Wait until it is serving; the start's failure (with its stderr) otherwise."""
+        self.join_starter()
+        if self._failure is not None:
+            raise self._failure
+        return self
+
+    def join_starter(self) -> None:
+        if self._starter is not None:
+            self._starter.join(READY_TIMEOUT + 10.0)
+
+    def _read(self, stream: IO[str], lines: collections.deque[str], watch_ready: bool) -> None:
+        for line in stream:
+            lines.append(line.rstrip("\n"))
+            if watch_ready and line.startswith("mode manager "):
+                self._ready.set()
+        stream.close()
+
+    def log(self) -> list[tuple[str, str, str]]:
+        """(severity, logger, message) of every log line on stderr so far."""
+        matches = [LOG_LINE.match(line) for line in list(self._stderr)]
+        return [(m.group(1), m.group(2), m.group(3)) for m in matches if m is not None]
+
+    def lines(self, *words: str, severities: tuple[str, ...] = ()) -> list[str]:
+        """The messages of the log lines that contain every one of ``words`` (case-insensitive)."""
+        return [message for severity, _, message in self.log()
+                if all(word.lower() in message.lower() for word in words)
+                and (not severities or severity in severities)]
+
+
+@pytest.fixture(name="start_manager")
+def start_manager_fixture() -> Iterator[Callable[..., ManagerProcess]]:
+    """``start(*args, model="pilot")``: ``sm-bt manager MODEL ARGS`` starting (call ``ready()`` on
+    it before use); stopped at teardown, once its start is over (it cannot escape the stop)."""
+    started: list[ManagerProcess] = []
+
+    def start(*args: str, model: str = "pilot") -> ManagerProcess:
+        process = ManagerProcess(model, *args)
+        started.append(process)
+        return process.launch()
+
+    yield start
+    for process in started:
+        process.join_starter()
+        process.stop()
+    remove_stale_shm_files()

@@ -1,7 +1,8 @@
-"""pytest plugin for ``make stress``: print what the property tests' scenarios did, at the end.
+"""pytest plugin for ``make stress``: print what the property tests did, at the end.
 
 Loaded with ``-p stress_summary`` (``tests`` on ``PYTHONPATH``), so that ``make test`` does not
-print it. The numbers come from :data:`scenario.STATS`, which every scenario run adds to.
+print it. The numbers come from :data:`scenario.STATS`, which every scenario run adds to, and
+:data:`model_fuzz.OUTCOMES`, which every fuzzed model file adds to.
 """
 
 from __future__ import annotations
@@ -10,8 +11,10 @@ from typing import Any
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:
+    from model_fuzz import summary
     from scenario import STATS
 
     terminalreporter.section("stress summary")
-    for line in STATS.summary().splitlines():
+    scenarios = STATS.summary().splitlines() if STATS.scenarios else []
+    for line in [*scenarios, *summary().splitlines()]:
         terminalreporter.write_line(line)

@@ -8,7 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from sm_bt.cli import COMMANDS, bundled_names, format_value, main
+from sm_bt.cli import COMMANDS, main
+from sm_bt.cli.common import bundled_names
+from sm_bt.cli.modes import format_value
 
 MODELS = Path(__file__).parent / "models"
 OK = MODELS / "cli_ok.yaml"
@@ -138,7 +140,7 @@ def test_check_a_tree_file_against_the_model_given_with_it(capsys: pytest.Captur
     assert err.splitlines() == [f"{bad}:4: error: <ModeIs 'ModeIs'>: unknown part 'pilto' (parts: pilot, amcl, "
                                 "controller_server, pointcloud_to_laser, laser_resender)",
                                 f"{bad}:5: error: unknown node <Bogus> (import the module that defines it, or pass "
-                                "it in registry=)"]
+                                "it in registry=)", "3 files checked, 1 failed"]
     assert out.splitlines()[-1] == f"{pilot.XML}: ok against pilot"  # the other files are still checked
 
 
@@ -309,3 +311,101 @@ def test_check_reports_every_file_of_a_mixed_set_and_never_an_internal_error(
         assert f"{tmp_path / name}: failed" in err
         assert f"{tmp_path / name}:0:" not in err  # every error has a real line
     assert "internal error" not in err and "Traceback" not in err
+
+
+def test_check_of_a_directory_reports_every_good_and_bad_file_and_exits_1(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    from sm_bt.bundled import path as bundled_path
+
+    (tmp_path / "nested").mkdir()
+    (tmp_path / "good.yaml").write_bytes(bundled_path("pilot").read_bytes())
+    (tmp_path / "nested" / "also_good.yml").write_bytes(bundled_path("actuation").read_bytes())
+    (tmp_path / "nested" / "truncated.yaml").write_bytes(bundled_path("pilot").read_bytes()[:300])
+    (tmp_path / "binary.yaml").write_bytes(b"\x00\x01\x02")
+    (tmp_path / "notes.txt").write_text("not a model")
+    code, out, err = run(capsys, "check", tmp_path)
+    assert code == 1
+    assert f"{tmp_path / 'good.yaml'}: ok (1 system, 4 nodes)" in out
+    assert f"{tmp_path / 'nested' / 'also_good.yml'}: ok (" in out
+    assert f"{tmp_path / 'nested' / 'truncated.yaml'}: failed (" in err
+    assert f"{tmp_path / 'binary.yaml'}:1: error: character" in err
+    assert "notes.txt" not in out + err
+    assert err.splitlines()[-1] == "4 files checked, 2 failed"
+    assert "Traceback" not in err and "internal error" not in err
+
+
+def test_check_of_an_empty_directory_says_so(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code, _, err = run(capsys, "check", tmp_path)
+    assert (code, err) == (1, f"sm-bt: error: {tmp_path}: a directory with no model (.yaml, .yml) or tree (.xml) "
+                              "files\n")
+
+
+def test_check_reports_an_internal_error_for_its_file_and_checks_the_others(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """A bug in the loader (simulated: it raises on one file) costs that file, not the run; --debug
+    adds the traceback."""
+    import sm_bt.cli.common as cli
+
+    real = cli.load_model
+
+    def buggy(path: str, **kwargs: bool) -> object:
+        if str(path).endswith("buggy.yaml"):
+            raise ZeroDivisionError("division by zero")
+        return real(path, **kwargs)
+
+    monkeypatch.setattr(cli, "load_model", buggy)
+    (tmp_path / "buggy.yaml").write_text("a: 1\n")
+    code, out, err = run(capsys, "check", tmp_path / "buggy.yaml", "pilot")
+    assert code == 1
+    assert out.splitlines()[0] == "pilot: ok (1 system, 4 nodes)"
+    assert err.splitlines() == [f"{tmp_path / 'buggy.yaml'}: internal error: ZeroDivisionError: division by zero "
+                                "(this is a bug in sm-bt: please report it with this file; --debug shows the "
+                                "traceback)", "2 files checked, 1 failed"]
+    code, _, err = run(capsys, "check", "--debug", tmp_path / "buggy.yaml", "pilot")
+    assert code == 1 and "Traceback (most recent call last):" in err and 'raise ZeroDivisionError' in err
+
+
+def test_an_unreadable_model_file_is_named_without_a_line(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    from sm_bt.model import ModelError, load_model
+
+    with pytest.raises(ModelError) as raised:
+        load_model(tmp_path / "missing.yaml")
+    assert str(raised.value).startswith(f"{tmp_path / 'missing.yaml'}: error: cannot read the model file: ")
+
+
+@pytest.mark.parametrize(("variable", "value", "says"), [
+    ("ROS_DOMAIN_ID", "abc", "ROS_DOMAIN_ID='abc' is not a ROS 2 domain id: set it to a whole number from 0 to 232"),
+    ("ROS_DOMAIN_ID", "300", "ROS_DOMAIN_ID='300' is not a ROS 2 domain id"),
+    ("ROS_AUTOMATIC_DISCOVERY_RANGE", "lan", "ROS_AUTOMATIC_DISCOVERY_RANGE='lan' is not a discovery range: use one "
+                                             "of SUBNET, LOCALHOST, OFF, SYSTEM_DEFAULT"),
+])
+@pytest.mark.parametrize("command", [("monitor", "pilot", "--ros", "--once"), ("manager", "pilot")])
+def test_a_bad_ros_variable_is_named_with_its_fix(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+                                                  variable: str, value: str, says: str,
+                                                  command: tuple[str, ...]) -> None:
+    """rcl only says "failed to initialize rcl" (it was an internal error, exit 1, with a hint of a bug)."""
+    import sm_bt.cli.manager
+
+    # In this process: no root log handler, no signal handlers left behind by `sm-bt manager`.
+    monkeypatch.setattr(sm_bt.cli.manager, "configure_logging", lambda level: None)
+    monkeypatch.setattr(sm_bt.cli.manager, "install_stop_handlers", lambda stop: None)
+    monkeypatch.setenv(variable, value)
+    code, _, err = run(capsys, *command)
+    assert code == 1
+    assert err.startswith(f"sm-bt: error: {says}") and "internal error" not in err
+
+
+@pytest.mark.parametrize(("change", "says"), [
+    ("pilot=f_nrmal_mode", "--change pilot=f_nrmal_mode: 'f_nrmal_mode' is neither a mode of pilot nor a transition "
+                           "(did you mean 'f_normal_mode'?)"),
+    ("pilto=configure", "--change pilto=configure: no part 'pilto' in pilot (did you mean 'pilot'?)"),
+    ("pilot=configur", "--change pilot=configur: 'configur' is neither a mode of pilot nor a transition (did you "
+                       "mean 'configure'?)"),
+    ("pilot=xyzzy", "--change pilot=xyzzy: 'xyzzy' is neither a mode of pilot nor a transition (modes: __DEFAULT__, "
+                    "f_normal_mode, f_degraded_mode, f_performance_mode, f_energy_saving_mode, f_slow_mode; "
+                    "transitions: configure, activate, deactivate, cleanup, shutdown)"),
+])
+def test_a_typo_in_a_change_is_a_usage_error_with_the_closest_name(capsys: pytest.CaptureFixture[str], change: str,
+                                                                   says: str) -> None:
+    code, out, err = run(capsys, "monitor", "pilot", "--change", change, "--once")
+    assert (code, out, err) == (2, "", f"sm-bt monitor: error: {says}\n")

@@ -106,3 +106,24 @@ def test_regression_alias_and_anchor_only_documents_name_line_one(text: str) -> 
     with pytest.raises(ModelError) as raised:
         load_model_text(text, "a.yaml")
     assert raised.value.issues and all(issue.location.line >= 1 for issue in raised.value.issues)
+
+
+# -- found by the fuzz tests (test_model_fuzz.py), smallest inputs ---------------------------------------
+
+
+@pytest.mark.parametrize(("text", "line"), [("[\n", 1), ("a: [\n\n", 2), ("  [  # a comment, no line break", 1),
+                                            ("a: [\r\rb", 3)])
+def test_regression_a_syntax_error_at_the_end_of_the_file_is_on_its_last_line(text: str, line: int) -> None:
+    """libyaml marks the end of the stream one line below a final line break: line 2 of a 1-line file."""
+    with pytest.raises(ModelError) as raised:
+        load_model_text(text, "end.yaml")
+    (issue,) = raised.value.issues
+    assert issue.location.line == line, str(issue)
+
+
+def test_regression_a_forbidden_character_after_non_ascii_text_is_on_its_own_line() -> None:
+    """libyaml's position counts UTF-8 bytes; it was used as a character index (line 4 of 3)."""
+    with pytest.raises(ModelError) as raised:
+        load_model_text("é: 1\né: 2\na: \x7f\n", "del.yaml")
+    assert str(raised.value) == ("del.yaml:3: error: character 127 is not allowed in YAML (control characters and "
+                                 "invalid code points): remove it")

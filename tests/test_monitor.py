@@ -175,6 +175,21 @@ def test_json_snapshot_shape_and_round_trip() -> None:
     assert (pilot["kind"], pilot["state_inferred"], pilot["divergence"]["cause"]) == ("system", True, "fault")
 
 
+def test_json_times_are_seconds_since_the_start_of_the_run() -> None:
+    """On ROS the clock is monotonic time since boot: 'since' was raw clock time while 'time' was
+    relative to the run's start. Both count from the epoch now."""
+    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    normal(rig)
+    fault_at = rig.clock.now()
+    rig.backend.trigger("laser_resender", Transition.DEACTIVATE)
+    rig.run(3.0)
+    epoch = 1.0
+    data = to_json(snapshot(rig.manager), rig.clock.now(), epoch)
+    laser = next(entry for entry in data["parts"] if entry["part"] == "laser_resender")
+    assert data["time"] == pytest.approx(rig.clock.now() - epoch)
+    assert fault_at - epoch <= laser["divergence"]["since"] < data["time"]
+
+
 def test_json_has_nulls_before_any_target() -> None:
     rig = Rig(bundled("pilot"))
     entry = to_json(snapshot(rig.manager), 0.0)["parts"][0]
@@ -272,19 +287,19 @@ def test_cli_json_follows_the_requests(capsys: pytest.CaptureFixture[str]) -> No
     assert len({json.dumps(s["parts"]) for s in snapshots}) == len(snapshots)  # only changes are printed
 
 
-def test_cli_unknown_mode_fails_with_a_message(capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_unknown_mode_is_a_usage_error_before_anything_runs(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, err = run_cli(capsys, "pilot", "--change", "pilot=configure", "--change", "pilot=nope",
                              "--json", "--once", "--speed", "0")
-    assert code == 1
-    assert err.startswith("sm-bt: error: pilot=nope failed: unknown mode 'nope' of pilot (modes: ")
+    assert code == 2
+    assert err.startswith("sm-bt monitor: error: --change pilot=nope: 'nope' is neither a mode of pilot nor a "
+                          "transition (modes: ")
     assert "f_normal_mode" in err and "Traceback" not in err
-    (line,) = out.splitlines()  # the earlier request still ran, and the snapshot is still printed
-    assert by_state(json.loads(line))["pilot"] == ("inactive", None)
+    assert out == ""  # refused up front: not even the first request ran
 
 
 def test_cli_unknown_part_and_bad_values(capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = run_cli(capsys, "pilot", "--change", "nobody=configure", "--speed", "0", "--once")
-    assert code == 1 and "unknown part 'nobody'" in err and "Traceback" not in err
+    assert code == 2 and "no part 'nobody' in pilot" in err and "Traceback" not in err
     code, _, err = run_cli(capsys, "pilot", "--change", "pilot", "--speed", "0")
     assert code == 2 and "not PART=MODE" in err
     code, _, err = run_cli(capsys, "pilot", "--speed", "-1")
@@ -325,3 +340,40 @@ def test_cli_help_mentions_ros_watching(capsys: pytest.CaptureFixture[str]) -> N
     assert code == 0
     assert "--ros" in out and "live ROS 2 nodes" in out
     assert "--change" in out and "--json" in out and "--once" in out
+
+
+# -- the console: plain text on pipes, NO_COLOR on terminals ------------------------------------
+
+
+def _printed(console_stream: io.StringIO) -> str:
+    from sm_bt.monitor import terminal_console
+
+    console = terminal_console(console_stream)
+    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    normal(rig)
+    console.print("[  12.00 s] " + "a long narration line " * 20, style="bold red", markup=False)
+    console.print(render_rich(snapshot(rig.manager), title="pilot"))
+    return console_stream.getvalue()
+
+
+def test_piped_output_is_plain_unwrapped_text_without_trailing_spaces() -> None:
+    out = _printed(io.StringIO())
+    assert "\x1b" not in out
+    lines = out.splitlines()
+    assert lines[0] == "[  12.00 s] " + ("a long narration line " * 20).rstrip()  # one line, however long
+    assert not [line for line in lines if line != line.rstrip()]
+    assert any(line.split() == ["amcl", "active", "active", "__DEFAULT__", "__DEFAULT__(*)"] for line in lines)
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_a_terminal_gets_colour_unless_no_color_is_set(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("NO_COLOR", raising=False)
+    monkeypatch.setenv("TERM", "xterm-256color")
+    assert "\x1b[31m" in _printed(_Terminal()) or "\x1b[1;31m" in _printed(_Terminal())
+    monkeypatch.setenv("NO_COLOR", "1")
+    coloured = _printed(_Terminal())
+    assert "31m" not in coloured and "33m" not in coloured  # no red, no yellow (bold may stay)

@@ -10,15 +10,10 @@ from, before ``mode_request_info``; the manager logs what an operator needs on s
 
 from __future__ import annotations
 
-import collections
-import re
-import sys
-import threading
 import time
-from collections.abc import Callable, Iterator
-from typing import IO, Any
+from collections.abc import Callable
+from typing import Any
 
-import pytest
 from lifecycle_msgs.msg import State as StateMsg
 from lifecycle_msgs.msg import Transition as TransitionMsg
 from lifecycle_msgs.msg import TransitionEvent
@@ -26,96 +21,15 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_processes import NodeProcess, RosContext, Starter, remove_stale_shm_files, wait_until
+from ros_processes import LOG_LINE, ManagerProcess, RosContext, Starter, wait_until
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetMode
-
-from sm_bt.ros.node_process import READY_TIMEOUT
 
 #: As the manager publishes: a subscriber that joins late still gets the last message.
 LATCHED = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
-#: A log line in ROS 2's console format: ``[SEVERITY] [seconds.micro] [logger]: message`` (rclpy's
-#: own lines have nanoseconds).
-LOG_LINE = re.compile(r"^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[\d+\.\d{6}(?:\d{3})?\] \[([\w.]+)\]: (.*)$")
 #: The first call after discovery can take a while; later ones are fast.
 CALL_TIMEOUT = 3.0
-
-
-# -- the manager's process -----------------------------------------------------------------------------
-
-
-class ManagerProcess(NodeProcess):
-    """``python -m sm_bt.cli manager MODEL ARGS...``: ready once it says what it serves; stopped by
-    PID like every ROS process of the tests (SIGINT, then SIGKILL); its stderr is kept whole."""
-
-    def __init__(self, model: str, *args: str) -> None:
-        super().__init__(model)
-        self.command = [sys.executable, "-m", "sm_bt.cli", "manager", model, *args]
-        self._stderr = collections.deque(maxlen=20_000)
-        self._starter: threading.Thread | None = None
-        self._failure: BaseException | None = None
-
-    def launch(self) -> ManagerProcess:
-        """:meth:`start` in a background thread, so that the node processes start meanwhile;
-        :meth:`ready` waits for it."""
-
-        def run() -> None:
-            try:
-                self.start()
-            except BaseException as failure:  # re-raised by ready()
-                self._failure = failure
-
-        self._starter = threading.Thread(target=run, name="manager-start", daemon=True)
-        self._starter.start()
-        return self
-
-    def ready(self) -> ManagerProcess:
-        """Wait until it is serving; the start's failure (with its stderr) otherwise."""
-        self.join_starter()
-        if self._failure is not None:
-            raise self._failure
-        return self
-
-    def join_starter(self) -> None:
-        if self._starter is not None:
-            self._starter.join(READY_TIMEOUT + 10.0)
-
-    def _read(self, stream: IO[str], lines: collections.deque[str], watch_ready: bool) -> None:
-        for line in stream:
-            lines.append(line.rstrip("\n"))
-            if watch_ready and line.startswith("mode manager "):
-                self._ready.set()
-        stream.close()
-
-    def log(self) -> list[tuple[str, str, str]]:
-        """(severity, logger, message) of every log line on stderr so far."""
-        matches = [LOG_LINE.match(line) for line in list(self._stderr)]
-        return [(m.group(1), m.group(2), m.group(3)) for m in matches if m is not None]
-
-    def lines(self, *words: str, severities: tuple[str, ...] = ()) -> list[str]:
-        """The messages of the log lines that contain every one of ``words`` (case-insensitive)."""
-        return [message for severity, _, message in self.log()
-                if all(word.lower() in message.lower() for word in words)
-                and (not severities or severity in severities)]
-
-
-@pytest.fixture(name="start_manager")
-def start_manager_fixture() -> Iterator[Callable[..., ManagerProcess]]:
-    """``start(*args)``: ``sm-bt manager pilot ARGS`` starting (call ``ready()`` on it before use);
-    stopped at teardown, once its start is over (it cannot escape the stop)."""
-    started: list[ManagerProcess] = []
-
-    def start(*args: str) -> ManagerProcess:
-        process = ManagerProcess("pilot", *args)
-        started.append(process)
-        return process.launch()
-
-    yield start
-    for process in started:
-        process.join_starter()
-        process.stop()
-    remove_stale_shm_files()
 
 
 # -- the client's side (rclpy only) ----------------------------------------------------------------------

@@ -25,6 +25,21 @@ venv="$(cd "$venv" 2>/dev/null && pwd)" || { echo "interfaces: ERROR: no venv at
 py="$venv/bin/python"
 rel() { echo "${1#"$root"/}"; }
 
+# While a build runs, a line every 10 s: the time so far and the step the log shows (pip's phase,
+# then CMake's [done/total] build steps), so that a minute-long build shows it is alive.
+show_progress() {
+  local pid=$1 log=$2 start=$3 next=$((SECONDS + 10)) step
+  while kill -0 "$pid" 2>/dev/null; do
+    sleep 1
+    if ((SECONDS >= next)) && kill -0 "$pid" 2>/dev/null; then
+      next=$((SECONDS + 10))
+      step="$(grep -a -o -E "Installing build dependencies|Getting requirements to build wheel|Preparing metadata|Building wheel|-- Configuring|\[[0-9]+/[0-9]+\]" "$log" 2>/dev/null | tail -1 || true)"
+      if [[ $step =~ ^\[([0-9]+)/([0-9]+)\]$ ]]; then step="compiling, step ${BASH_REMATCH[1]} of ${BASH_REMATCH[2]}"; fi
+      echo "$name: ... $((SECONDS - start)) s${step:+: $step}"
+    fi
+  done
+}
+
 die() {  # die <what failed> <details...>
   {
     echo
@@ -124,11 +139,14 @@ PY
     start=$SECONDS
     # Clean build environment: a sourced ROS install (/opt/ros/...) must not leak into the build.
     # PIP_CONSTRAINT reaches pip's isolated build env and pins its transitive dependencies.
-    if env -u AMENT_PREFIX_PATH -u CMAKE_PREFIX_PATH -u COLCON_PREFIX_PATH -u PYTHONPATH \
-         PIP_CONSTRAINT="$pkg/build-constraints.txt" \
-         CMAKE_BUILD_PARALLEL_LEVEL="${CMAKE_BUILD_PARALLEL_LEVEL:-$(nproc 2>/dev/null || echo 2)}" \
-         "$py" -m pip wheel --no-deps --progress-bar off --disable-pip-version-check -v \
-           -w "$tmp" "$pkg" >"$log" 2>&1; then
+    env -u AMENT_PREFIX_PATH -u CMAKE_PREFIX_PATH -u COLCON_PREFIX_PATH -u PYTHONPATH \
+      PIP_CONSTRAINT="$pkg/build-constraints.txt" \
+      CMAKE_BUILD_PARALLEL_LEVEL="${CMAKE_BUILD_PARALLEL_LEVEL:-$(nproc 2>/dev/null || echo 2)}" \
+      "$py" -m pip wheel --no-deps --progress-bar off --disable-pip-version-check -v \
+        -w "$tmp" "$pkg" >"$log" 2>&1 &
+    builder=$!
+    show_progress "$builder" "$log" "$start"
+    if wait "$builder"; then
       built="$(ls "$tmp"/$wheel-*.whl 2>/dev/null | head -1 || true)"
     else
       built=""

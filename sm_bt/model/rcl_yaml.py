@@ -17,6 +17,7 @@ import math
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any, NamedTuple
 
 import yaml
 from yaml._yaml import CParser
@@ -121,9 +122,11 @@ def type_name(value: ParamValue) -> str:
     return "string"
 
 
-@dataclass(frozen=True)
-class YScalar:
-    """A scalar: its text as written (after YAML folding), its rcl-typed value and its line."""
+class YScalar(NamedTuple):
+    """A scalar: its text as written (after YAML folding), its rcl-typed value and its line.
+
+    A named tuple, not a frozen dataclass: a model file has one per value and key, and a tuple is
+    built several times faster."""
 
     text: str
     value: Scalar
@@ -228,10 +231,12 @@ def parse_document(text: str, diag: Diagnostics) -> YMap | None:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         what = " ".join(part for part in (exc.context, exc.problem) if part)
-        diag.error(mark.line + 1 if mark else 1, f"YAML syntax error: {what}: fix the YAML syntax at this line")
+        diag.error(min(_line_of(mark), last_line(text)), f"YAML syntax error: {what}: fix the YAML syntax at this line")
         return None
     except yaml.reader.ReaderError as exc:
-        line = text.count("\n", 0, exc.position) + 1
+        # libyaml reads the text as UTF-8: its position counts bytes, not characters.
+        before = text.encode("utf-8", "surrogatepass")[:exc.position].decode("utf-8", "replace")
+        line = min(len(LINE_BREAK.split(before)), last_line(text))
         diag.error(line, f"character {exc.character!r} is not allowed in YAML (control characters and invalid "
                          "code points): remove it")
         return None
@@ -265,6 +270,19 @@ def _line_of(mark: yaml.Mark | CMark | None) -> int:
     return mark.line + 1 if mark is not None else 1
 
 
+#: What libyaml (hence every mark) counts as a line break.
+LINE_BREAK = re.compile("\r\n|[\r\n\x85\u2028\u2029]")
+
+
+def last_line(text: str) -> int:
+    """The number of the file's last line. libyaml marks the end of the stream one line further
+    down after a final line break; an error there is on the last line."""
+    if "\r" in text or "\x85" in text or "\u2028" in text or "\u2029" in text:
+        lines = LINE_BREAK.split(text)
+        return max(1, len(lines) - (lines[-1] == ""))
+    return max(1, text.count("\n") + (not text.endswith("\n")))
+
+
 class _Builder:
     """Turns libyaml's events into YScalar/YSeq/YMap, reporting what rcl refuses."""
 
@@ -274,35 +292,41 @@ class _Builder:
         self.stack: list[_Collection] = []
         self.root: YNode | _Skipped | None = None
         self.documents = 0
+        self.last_line = last_line(source)
 
     def build(self) -> YNode | _Skipped | None:
         parser = CParser(self.source)
+        get_event, handle = parser.get_event, self.event
         try:
-            while (event := parser.get_event()) is not None:
-                self.event(event)
+            while (event := get_event()) is not None:
+                handle(event)
         finally:
             parser.dispose()
         return self.root
 
-    def event(self, event: yaml.Event) -> None:
-        line = _line_of(event.start_mark)
-        if isinstance(event, yaml.ScalarEvent):
-            self.anchor(event, line)
+    def event(self, event: Any) -> None:  # a yaml.Event; its exact class is tested below
+        # libyaml's parser makes events of exactly these classes: `type() is` is the cheap test,
+        # in the order of how often they come (this loop is most of a big file's load time).
+        kind = type(event)
+        line = min(event.start_mark.line + 1, self.last_line)
+        if kind is yaml.ScalarEvent:
+            if event.anchor is not None:
+                self.anchor(event, line)
             self.add(self.scalar(event, line) if self.kept() else _SKIPPED, line, is_scalar=True)
-        elif isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+        elif kind is yaml.MappingEndEvent or kind is yaml.SequenceEndEvent:
+            done = self.stack.pop()
+            self.add(self.finish(done) if done.kept else _SKIPPED, done.line, is_scalar=False)
+        elif kind is yaml.MappingStartEvent or kind is yaml.SequenceStartEvent:
             self.anchor(event, line)
             if len(self.stack) >= MAX_DEPTH:
                 raise _TooDeep(line)
-            is_map = isinstance(event, yaml.MappingStartEvent)
+            is_map = kind is yaml.MappingStartEvent
             self.stack.append(_Collection(line, is_map, self.kept() and self.accepts_collection(is_map, line)))
-        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
-            done = self.stack.pop()
-            self.add(self.finish(done) if done.kept else _SKIPPED, done.line, is_scalar=False)
-        elif isinstance(event, yaml.AliasEvent):
+        elif kind is yaml.AliasEvent:
             self.diag.error(line, f"alias '*{event.anchor}': ROS 2 parameter files do not support aliases: "
                                   "write the value out in full")
             self.add(_SKIPPED, line, is_scalar=False)
-        elif isinstance(event, yaml.DocumentStartEvent):
+        elif kind is yaml.DocumentStartEvent:
             self.documents += 1
             if self.documents > 1:
                 raise _SecondDocument(line)

@@ -37,13 +37,13 @@ class PartKind(str, enum.Enum):
 
 @dataclass(frozen=True)
 class Location:
-    """Where something was written: file and 1-based line."""
+    """Where something was written: file and 1-based line (0: the file as a whole, e.g. unreadable)."""
 
     file: str
     line: int
 
     def __str__(self) -> str:
-        return f"{self.file}:{self.line}"
+        return f"{self.file}:{self.line}" if self.line else self.file
 
 
 @dataclass(frozen=True)

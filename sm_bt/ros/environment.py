@@ -17,7 +17,29 @@ INSTALL_HINT = ("install the ROS 2 extra: `pip install -c constraints.txt -e '.[
 
 
 class RosUnavailable(RuntimeError):
-    """rclpy or system_modes_msgs cannot be imported in this environment."""
+    """rclpy or system_modes_msgs cannot be imported in this environment, or the ROS 2 settings in
+    it are not valid (see :func:`check_settings`)."""
+
+
+#: rcl accepts these domain ids (the DDS port mapping leaves room for no more).
+MAX_DOMAIN_ID = 232
+#: The values of ROS_AUTOMATIC_DISCOVERY_RANGE that rcl knows.
+DISCOVERY_RANGES = ("SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT")
+
+
+def check_settings() -> None:
+    """Raise :class:`RosUnavailable` naming the variable and the fix when ``ROS_DOMAIN_ID`` or
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` holds what rcl would refuse (rcl's own error says
+    "failed to initialize rcl")."""
+    domain = os.environ.get("ROS_DOMAIN_ID", "")
+    if domain.strip() and not (domain.strip().isdigit() and int(domain) <= MAX_DOMAIN_ID):
+        raise RosUnavailable(f"ROS_DOMAIN_ID={domain!r} is not a ROS 2 domain id: set it to a whole number from 0 to "
+                             f"{MAX_DOMAIN_ID} (robots that should see each other use the same one), or unset it "
+                             "for the default, 0")
+    reach = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "")
+    if reach and reach not in DISCOVERY_RANGES:
+        raise RosUnavailable(f"ROS_AUTOMATIC_DISCOVERY_RANGE={reach!r} is not a discovery range: use one of "
+                             f"{', '.join(DISCOVERY_RANGES)}, or unset it")
 
 
 def run_domain_id() -> int:
@@ -38,6 +60,7 @@ def prepare(*, own_domain: bool = False, local_only: bool = True) -> None:
         os.environ.setdefault("ROS_DOMAIN_ID", str(run_domain_id()))
     if "ROS_LOG_DIR" not in os.environ:
         os.environ["ROS_LOG_DIR"] = os.path.join(tempfile.gettempdir(), f"sm_bt-roslog-{os.getuid()}")
+    check_settings()
 
 
 def require_ros() -> None:

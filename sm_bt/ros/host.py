@@ -209,7 +209,7 @@ def _load_model(name: str) -> Model:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``sm-bt-mission``: see the module's documentation."""
-    from sm_bt.manager_cli import configure_logging
+    from sm_bt.ros.console_log import configure_logging
     from sm_bt.ros.environment import RosUnavailable, prepare, require_ros
 
     configure_logging("info")

@@ -49,8 +49,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
-from sm_bt.arguments import non_negative
-from sm_bt.cli import CliError, load
+from sm_bt.cli.arguments import non_negative
+from sm_bt.cli.common import CliError, load
 from sm_bt.model.errors import ModelError
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import environment

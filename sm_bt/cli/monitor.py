@@ -16,11 +16,13 @@ import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager, ExitStack, nullcontext
 from dataclasses import dataclass
+from typing import Any
 
 from rich.console import Console
 
 from sm_bt import bundled
-from sm_bt.arguments import non_negative
+from sm_bt.cli.arguments import non_negative
+from sm_bt.cli.common import PROG, check_request, load_or_report
 from sm_bt.engine.clock import Clock
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
 from sm_bt.engine.manager import ModeManager
@@ -78,7 +80,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="watch the model's live ROS 2 nodes instead of simulated ones (in ROS_DOMAIN_ID); "
                              "needs the ros extra")
     parser.add_argument("--json", action="store_true",
-                        help="print JSON Lines snapshots on stdout instead of the table (one per change)")
+                        help="print JSON Lines snapshots on stdout instead of the table (one per change); "
+                             "their times ('time', a divergence's 'since') are seconds since the start of "
+                             "the run (virtual seconds on simulated nodes)")
     parser.add_argument("--once", action="store_true", help="print one table (or snapshot) at the end, and exit")
     parser.add_argument("--lenient", action="store_true",
                         help="accept what the reference implementation accepts where sm_bt is stricter")
@@ -89,19 +93,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sm_bt.cli import _load_or_report  # not at the top: sm_bt.cli imports this module
 
-    model = _load_or_report(args.model, strict=not args.lenient)
+    model = load_or_report(args.model, strict=not args.lenient)
     if model is None:
         return 1
+    for change in args.change:
+        check_request(model, change.part, change.value, "--change", args.model)
     for warning in model.warnings:
         print(warning, file=sys.stderr)
     advance: Callable[[float], None]
     with ExitStack() as stack:
+        graph = None
         if args.ros:
-            manager = _ros_manager(model, stack)
-            if manager is None:
+            runtime = _ros_runtime(model, stack)
+            if runtime is None:
                 return 1
+            manager, graph = runtime.manager, runtime.node
             advance = time.sleep
         else:
             backend = SimBackend(model)
@@ -112,12 +119,12 @@ def run(args: argparse.Namespace) -> int:
                           epoch=manager.clock.now())
         stack.callback(monitor.close)
         watch = _Watch(manager, manager.clock, advance, monitor, show=not args.once)
-        return _watch(args, model, watch, monitor)
+        return _watch(args, model, watch, monitor, graph)
 
 
-def _ros_manager(model: Model, stack: ExitStack) -> ModeManager | None:
-    """An observing manager on ROS 2, closed by ``stack``; ``None`` (said why) without ROS."""
-    from sm_bt.cli import PROG
+def _ros_runtime(model: Model, stack: ExitStack) -> Any:
+    """A :class:`~sm_bt.ros.runtime.RosRuntime` with an observing manager (serving nothing, no rules,
+    no recovery), closed by ``stack``; ``None`` (said why) without ROS."""
     from sm_bt.ros.environment import RosUnavailable, require_ros
 
     try:
@@ -130,7 +137,7 @@ def _ros_manager(model: Model, stack: ExitStack) -> ModeManager | None:
         print(f"{PROG}: error: {error}", file=sys.stderr)
         return None
     stack.callback(runtime.close)
-    return runtime.manager
+    return runtime
 
 
 def _paced(advance: Callable[[float], None], speed: float) -> Callable[[float], None]:
@@ -144,9 +151,8 @@ def _paced(advance: Callable[[float], None], speed: float) -> Callable[[float], 
     return step
 
 
-def _watch(args: argparse.Namespace, model: Model, watch: _Watch, monitor: Monitor) -> int:
-    from sm_bt.cli import PROG
-
+def _watch(args: argparse.Namespace, model: Model, watch: _Watch, monitor: Monitor, graph: Any = None) -> int:
+    """Show, make the requests in turn, show; ``graph``: the ROS node to look at the graph with."""
     manager = watch.manager
     failed = 0
     with watch.view():
@@ -157,6 +163,14 @@ def _watch(args: argparse.Namespace, model: Model, watch: _Watch, monitor: Monit
             if missing:
                 print(f"{PROG}: warning: not reachable after {DISCOVERY:g} s: {', '.join(missing)}",
                       file=sys.stderr)
+            served = _served_by_a_manager(graph, model) if args.change else []
+            if served:  # two managers acting on the same nodes would undo each other's changes
+                first = args.change[0]
+                how = "state" if first.is_transition else "mode"
+                print(f"{PROG}: error: a mode manager already serves {', '.join(served)} (/{served[0]}/change_mode): "
+                      "next to it, sm-bt monitor --ros only watches; make the changes through that manager, e.g. "
+                      f"`sm-bt {how} set {first.part} {first.value} --wait`", file=sys.stderr)
+                return 1
         for change in args.change:
             problem = watch.request(change, deadline)
             if problem:
@@ -168,6 +182,13 @@ def _watch(args: argparse.Namespace, model: Model, watch: _Watch, monitor: Monit
         else:
             watch.show()
     return 1 if failed else 0
+
+
+def _served_by_a_manager(node: Any, model: Model) -> list[str]:
+    """The model's parts whose ``change_mode`` another process serves (seen on the ROS graph)."""
+    served = {name[1:-len("/change_mode")] for name, types in node.get_service_names_and_types()
+              if name.endswith("/change_mode") and "system_modes_msgs/srv/ChangeMode" in types}
+    return [part for part in model.parts if part in served]
 
 
 class _Watch:

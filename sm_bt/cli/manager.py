@@ -17,18 +17,15 @@ import argparse
 import gc
 import logging
 import signal
-import sys
 import threading
 from types import FrameType
-from typing import Any, TextIO
+from typing import Any
 
-from sm_bt.arguments import non_negative, positive_int
+from sm_bt.cli.arguments import non_negative, positive_int
+from sm_bt.cli.common import CliError, load_or_report
 from sm_bt.model.types import Model, SystemPart
+from sm_bt.ros.console_log import LOG_LEVELS, configure_logging
 
-#: ``--log-level`` choices.
-LOG_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
-#: ROS 2's severity names where they differ from Python's.
-_SEVERITY = {"WARNING": "WARN", "CRITICAL": "FATAL"}
 #: The logger of the manager's own lines (start-up, service callbacks).
 log = logging.getLogger("sm_bt.ros.manager_node")
 
@@ -53,33 +50,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="accept what the reference accepts where sm_bt is stricter")
     parser.add_argument("--log-level", choices=tuple(LOG_LEVELS), default="info",
                         help="log to stderr from this level on (default info)")
-
-
-class RosFormatter(logging.Formatter):
-    """ROS 2's console format: ``[SEVERITY] [seconds.micro] [logger]: message``."""
-
-    def format(self, record: logging.LogRecord) -> str:
-        severity = _SEVERITY.get(record.levelname, record.levelname)
-        line = f"[{severity}] [{record.created:.6f}] [{record.name}]: {record.getMessage()}"
-        if record.exc_info:
-            line += "\n" + self.formatException(record.exc_info)
-        return line
-
-
-class _Handler(logging.StreamHandler):  # type: ignore[type-arg]
-    """The handler :func:`configure_logging` installs (so that calling it again replaces it)."""
-
-
-def configure_logging(level: str, stream: TextIO | None = None) -> None:
-    """Log from ``level`` (a ``--log-level`` choice) on to ``stream`` (stderr) in ROS 2's format,
-    through the root logger; replaces what an earlier call installed."""
-    root = logging.getLogger()
-    for handler in [h for h in root.handlers if isinstance(h, _Handler)]:
-        root.removeHandler(handler)
-    handler = _Handler(sys.stderr if stream is None else stream)
-    handler.setFormatter(RosFormatter())
-    root.addHandler(handler)
-    root.setLevel(LOG_LEVELS[level])
 
 
 def startup_lines(model: Model) -> list[str]:
@@ -135,3 +105,17 @@ def install_stop_handlers(stop: threading.Event) -> None:
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+
+
+def run(args: argparse.Namespace) -> int:
+    configure_logging(args.log_level)  # stderr, ROS 2's format; the library never does this
+    model = load_or_report(args.model, strict=not args.lenient)
+    if model is None:
+        return 1
+    stop = threading.Event()
+    install_stop_handlers(stop)
+    try:
+        serve(model, args, stop)
+    except RosMissing as error:
+        raise CliError(str(error)) from None
+    return 0

@@ -1,0 +1,7 @@
+"""``python -m sm_bt.cli``: the ``sm-bt`` console script."""
+
+import sys
+
+from sm_bt.cli.app import main
+
+sys.exit(main())

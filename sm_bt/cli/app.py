@@ -1,0 +1,118 @@
+"""``sm-bt``: the table of commands, the parser built from it, and :func:`main`.
+
+Each command lives in a module of its own in this package (``check``, ``modes``, ``demo``,
+``monitor``, ``view``, ``manager``) with an ``add_arguments(parser)`` and a ``run(args)`` that
+returns the exit code; what commands share is in :mod:`sm_bt.cli.common` (the program's name,
+:class:`~sm_bt.cli.common.CliError`, loading a model by path or bundled name) and
+:mod:`sm_bt.cli.arguments` (argument types). To add a command, write its module and add a
+:class:`~sm_bt.cli.common.Command` to :data:`COMMANDS`.
+
+Exit codes: 0 success, 1 any failure (a model that does not load, a missing file, ...), 2 usage
+errors (argparse). Failures are reported as messages, never as tracebacks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from sm_bt.cli import check, demo, manager, modes, monitor, remote, view
+from sm_bt.cli.common import PROG, CliError, Command, UsageError
+from sm_bt.model.types import DEFAULT_MODE
+
+#: Every subcommand, in the order ``--help`` lists them. Add new ones here.
+COMMANDS: list[Command] = [
+    Command("check", "validate model files (exit 1 if any fails to load)", check.add_arguments, check.run,
+            description="Load each model strictly and report every error as FILE:LINE: error: MESSAGE."),
+    Command("modes", "print the systems, modes, rules and node parameters of a model", modes.add_arguments,
+            modes.run, description="Print the hierarchy of a model: systems (nested ones indented) with "
+                                   f"their modes and rules, then every node with its parameter sets. "
+                                   f"'{DEFAULT_MODE}' is the reference's default-mode name."),
+    Command("demo", "run the MROS pilot mission tree on simulated nodes (--ros: real rclpy nodes)", demo.add_arguments,
+            demo.run,
+            description="The pilot mission tree (patrol, laser failure, degraded mode, low battery, recharge) on the "
+                        "embedded simulated backend, or with --ros on real rclpy lifecycle nodes in a child process "
+                        "managed over ROS 2."),
+    Command("monitor", "show target and actual state/mode of every part as it changes",
+            monitor.add_arguments, monitor.run,
+            description="The mode monitor: part, target state, actual state, target mode, actual mode; systems "
+                        "then nodes, (*) on inferred values, divergences highlighted. The model's nodes run on "
+                        "the embedded simulated backend, or with --ros are the live ROS 2 nodes; --change requests "
+                        "are made in turn."),
+    Command("view", "replay a recorded run in the browser (tree, modes, timeline)", view.add_arguments, view.run,
+            description="Serve the page of `sm-bt demo --view` for a run recorded with --record: the tree, the "
+                        "mode table and the run's timeline, with a scrubber over every recorded tick."),
+    Command("mode", "get, list or set the mode of a part, from a running manager over ROS 2",
+            remote.add_mode_arguments, remote.run_mode,
+            description="Command a running mode manager (sm-bt manager, or the reference's) over the system_modes "
+                        "interface: `mode get PART`, `mode list PART`, `mode set PART MODE [--wait]`. Exit status 1 "
+                        "when refused, not confirmed in time or no manager answers; 2 for a part or mode that is not "
+                        "served."),
+    Command("state", "get or change the lifecycle state of a part over ROS 2",
+            remote.add_state_arguments, remote.run_state,
+            description="`state get PART`, `state set PART TRANSITION [--wait]`: a system's through the manager, a "
+                        "node's through its own lifecycle service."),
+    Command("manager", "run the mode manager as a ROS 2 node (drop-in for system_modes' mode_manager)",
+            manager.add_arguments, manager.run,
+            description="Serve /{system}/change_state, get_state, get_available_states and /{part}/change_mode, "
+                        "get_mode, get_available_modes for every part of MODEL, publish mode_event, "
+                        "transition_event and the request topics (latched, as soon as inference changes), and "
+                        "manage the nodes through their lifecycle and parameter services. Needs the ros extra."),
+]
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("sm-bt")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="System modes for py_trees mission trees: check and inspect SMH model files, run the "
+                    "demo, watch modes, serve the mode manager on ROS 2.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for command in COMMANDS:
+        child = sub.add_parser(command.name, help=command.help, description=command.description or command.help)
+        command.add_arguments(child)
+        child.set_defaults(run=command.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``sm-bt`` with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:  # --help, --version and usage errors
+        if stop.code is None or isinstance(stop.code, int):
+            return stop.code or 0
+        return 1
+    try:
+        code: int = args.run(args)
+    except UsageError as error:
+        print(f"{PROG} {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except CliError as error:
+        print(f"{PROG}: error: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # The reader went away (`sm-bt modes pilot | head`): stop quietly.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
+    except Exception as error:  # a bug: still no traceback for the user, but say so
+        print(f"{PROG}: internal error: {type(error).__name__}: {error} (this is a bug in sm-bt; "
+              f"set SM_BT_TRACEBACK=1 to see the traceback)", file=sys.stderr)
+        if os.environ.get("SM_BT_TRACEBACK"):
+            raise
+        return 1
+    return code

@@ -1,0 +1,104 @@
+"""``sm-bt check FILE...``: validate model files (and mission trees against them).
+
+Every file is checked, whatever happened to the ones before: a model that fails to load, a tree
+with errors, even a bug in sm-bt on one file (reported as an internal error for that file;
+``--debug`` adds the traceback). A directory stands for the model and tree files below it. Exit
+status 1 if any file failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+from functools import partial
+from pathlib import Path
+from typing import TypeVar
+
+from sm_bt.cli.common import CliError, add_lenient, bundled_names, load_or_report, plural, print_issues
+from sm_bt.model.types import Model
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("models", nargs="+", metavar="FILE",
+                        help="model file, a directory (every .yaml/.yml model and .xml tree below it), or the name "
+                             "of a bundled model (" + ", ".join(bundled_names()) + "); a mission tree file (.xml) "
+                             "is checked against the models given with it")
+    add_lenient(parser)
+    parser.add_argument("--debug", action="store_true",
+                        help="on an internal error (a bug in sm-bt), print its traceback and go on")
+
+
+MODEL_SUFFIXES = (".yaml", ".yml")
+
+
+def _expand(names: Sequence[str]) -> list[str]:
+    """Every name, with a directory replaced by the model and tree files below it (sorted)."""
+    out: list[str] = []
+    for name in names:
+        if os.path.isdir(name):
+            found = sorted(str(path) for path in Path(name).rglob("*")
+                           if path.suffix in (*MODEL_SUFFIXES, ".xml") and path.is_file())
+            if not found:
+                raise CliError(f"{name}: a directory with no model (.yaml, .yml) or tree (.xml) files")
+            out += found
+        else:
+            out.append(name)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    names = _expand(args.models)
+    trees = [name for name in names if name.endswith(".xml")]
+    models: list[tuple[str, Model]] = []
+    failed = 0
+    for name in names:
+        if name in trees:
+            continue
+        model = _guarded(name, args.debug, partial(load_or_report, name, strict=not args.lenient))
+        if model is None:
+            failed += 1
+            continue
+        models.append((name, model))
+        print(f"{name}: ok ({plural(len(model.systems), 'system')}, {plural(len(model.nodes), 'node')})")
+        print_issues(model.warnings, sys.stdout)
+    for tree in trees:
+        failed += not _guarded(tree, args.debug, partial(_check_tree_file, tree, models))
+    if len(names) > 1 and (failed or len(names) > len(args.models)):  # a tally where one helps
+        print(f"{plural(len(names), 'file')} checked, {failed} failed", file=sys.stderr if failed else sys.stdout)
+    return 1 if failed else 0
+
+
+def _check_tree_file(tree: str, models: list[tuple[str, Model]]) -> bool:
+    """Check ``tree`` against every model (or alone, without one); print what was found."""
+    import sm_bt.trees.pilot  # noqa: F401 (registers the pilot's actions, which shipped trees use)
+    from sm_bt.trees.mission_xml import check_tree
+
+    against: list[tuple[str, Model | None]] = list(models) or [("", None)]
+    ok = True
+    for name, model in against:
+        issues = check_tree(tree, model)
+        for issue in issues:
+            print(issue, file=sys.stderr)
+        ok = ok and not issues
+        if not issues:
+            print(f"{tree}: ok" + (f" against {name}" if name else " (no model given: parts and modes not checked)"))
+    return ok
+
+
+T = TypeVar("T")
+
+
+def _guarded(name: str, debug: bool, check: Callable[[], T]) -> T | None:
+    """``check()``, or ``None`` after reporting an internal error (a bug) for ``name``, so that the
+    other files are still checked."""
+    try:
+        return check()
+    except Exception as error:  # a bug in sm-bt: say so, and go on with the next file
+        print(f"{name}: internal error: {type(error).__name__}: {error} (this is a bug in sm-bt: please report it "
+              "with this file" + ("" if debug else "; --debug shows the traceback") + ")", file=sys.stderr)
+        if debug:
+            traceback.print_exc(file=sys.stderr)
+        return None

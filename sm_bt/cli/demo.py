@@ -1,0 +1,91 @@
+"""``sm-bt demo``: the pilot mission on simulated nodes, or with ``--ros`` on real rclpy nodes.
+
+The demo itself (platforms, world, narration, summary) is :mod:`sm_bt.demo`; this module is its
+command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from sm_bt.cli.arguments import non_negative, port, positive_int
+from sm_bt.cli.common import PROG, CliError
+from sm_bt.demo import DEGRADED_FOR, REPAIR_AT, TREES, Auto, Demo, Options
+from sm_bt.trees.mission_xml import TreeFileError
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--tree", type=_tree, default="pilot", metavar="TREE",
+                        help="contingencies in the tree (pilot, default), chosen by a metacontroller "
+                             "(metacontrol), or a mission tree file in XML (trees/pilot.xml is the pilot "
+                             "tree; {cycles} in it is --cycles)")
+    parser.add_argument("--laser-failure-at", type=_time, default=15.0, metavar="SECONDS",
+                        help="world time the laser breaks; 'never' for no failure (default 15)")
+    parser.add_argument("--laser-repair-at", type=_time, default=Auto.AUTO, metavar="SECONDS",
+                        help=f"world time the laser is repaired; 'never' to leave it broken (default {REPAIR_AT:g}; "
+                             f"with --ros, once the pilot has been in degraded mode for {DEGRADED_FOR:g} s, as "
+                             "on simulated nodes: handling the failure takes real seconds there)")
+    parser.add_argument("--cycles", type=positive_int, default=2, help="patrol cycles (default 2)")
+    parser.add_argument("--speed", type=non_negative, default=25.0,
+                        help="world (virtual) seconds per wall second; 0 runs as fast as possible, "
+                             "simulated only (default 25)")
+    parser.add_argument("--quiet", action="store_true", help="print only the summary")
+    parser.add_argument("--view", type=port, nargs="?", const=8765, default=None, metavar="PORT",
+                        help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "
+                             "(default port 8765; 0: any free port); it stays until Ctrl-C after the run")
+    parser.add_argument("--view-host", default="127.0.0.1", metavar="HOST",
+                        help="address the view listens on (default 127.0.0.1: this machine only)")
+    parser.add_argument("--record", metavar="FILE.jsonl",
+                        help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")
+    parser.add_argument("--ros", action="store_true",
+                        help="run on real ROS 2 lifecycle nodes (python -m sm_bt.ros.sim_nodes pilot, started "
+                             "and stopped by the demo) with the manager on ROS 2, serving the system_modes "
+                             "interface meanwhile; mode changes take real time, the world runs --speed "
+                             "times faster; needs the ros extra")
+    parser.epilog = ("World time is the mission's: the robot's driving, recharging and the laser schedule. "
+                     "On simulated nodes it is the manager's virtual clock. With --ros the manager runs in "
+                     "real time (its mode changes, grace periods and timeouts take real seconds) while the "
+                     "world runs --speed times faster.")
+
+
+def _tree(text: str) -> str:
+    if text in TREES or text.endswith(".xml"):
+        return text
+    raise argparse.ArgumentTypeError(f"{text!r} is neither a shipped tree ({', '.join(sorted(TREES))}) "
+                                     "nor a tree file (.xml)")
+
+
+def _time(text: str) -> float | None:
+    if text == "never":
+        return None
+    return non_negative(text)
+
+
+def run(args: argparse.Namespace) -> int:
+    options = Options(laser_failure_at=args.laser_failure_at, laser_repair_at=args.laser_repair_at,
+                      cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree, ros=args.ros,
+                      view=args.view, view_host=args.view_host, record=args.record, linger=args.view is not None)
+    if not options.ros:
+        try:
+            return Demo(options).run()
+        except TreeFileError as error:
+            print(error, file=sys.stderr)
+            return 1
+        except OSError as error:  # the view's port
+            print(f"sm-bt demo: error: cannot serve the view on {options.view_host}:{options.view}: "
+                  f"{error.strerror or error} (choose another port: --view PORT, 0 for any)", file=sys.stderr)
+            return 1
+    from sm_bt.ros.environment import RosUnavailable
+    from sm_bt.ros.node_process import NodesError  # needs no rclpy
+
+    if not options.speed > 0:
+        print(f"{PROG} demo: error: --speed must be more than 0 with --ros", file=sys.stderr)
+        return 2
+    try:
+        return Demo(options).run()
+    except (RosUnavailable, NodesError) as error:
+        raise CliError(str(error)) from None
+    except TreeFileError as error:
+        print(error, file=sys.stderr)
+        return 1

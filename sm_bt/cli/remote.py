@@ -1,0 +1,139 @@
+"""``sm-bt mode ...`` and ``sm-bt state ...``: command a running mode manager from a shell.
+
+They speak the system_modes interface (:mod:`sm_bt.ros.client`), so they work against
+``sm-bt manager`` and the reference's ``mode_manager``, with no ROS install beyond the ``ros``
+extra::
+
+    sm-bt mode get pilot                         # pilot: f_normal_mode
+    sm-bt mode list pilot                        # the modes the manager offers
+    sm-bt mode set pilot f_degraded_mode --wait  # waits for the manager to confirm it
+    sm-bt state get pilot
+    sm-bt state set pilot configure --wait
+
+Exit status: 0 done (or accepted, without ``--wait``); 1 refused, not confirmed in time, or no
+manager answers; 2 a part, mode or transition that is not served (with the closest names).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from contextlib import AbstractContextManager
+from typing import Any
+
+from sm_bt.cli.arguments import non_negative
+from sm_bt.cli.common import CliError, UsageError
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
+
+DEFAULT_TIMEOUT = 10.0
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--timeout", type=non_negative, default=DEFAULT_TIMEOUT, metavar="SECONDS",
+                        help=f"give up after this long: to find the manager, for each answer, and with --wait "
+                             f"for the confirmation (default {DEFAULT_TIMEOUT:g})")
+
+
+def add_mode_arguments(parser: argparse.ArgumentParser) -> None:
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    get = actions.add_parser("get", help="print the part's current mode, as the manager infers it")
+    get.add_argument("part", metavar="PART")
+    listed = actions.add_parser("list", help="print the modes the manager offers for the part")
+    listed.add_argument("part", metavar="PART")
+    put = actions.add_parser("set", help="ask the manager for a mode of the part")
+    put.add_argument("part", metavar="PART")
+    put.add_argument("mode", metavar="MODE")
+    put.add_argument("--wait", action="store_true",
+                     help="wait until the manager confirms the part is in MODE; print how long it took")
+    for child in (get, listed, put):
+        _common(child)
+    parser.epilog = ("Needs a mode manager on ROS 2 (`sm-bt manager MODEL`, or the reference's) in this shell's "
+                     "ROS_DOMAIN_ID.")
+
+
+def add_state_arguments(parser: argparse.ArgumentParser) -> None:
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    get = actions.add_parser("get", help="print the part's lifecycle state")
+    get.add_argument("part", metavar="PART")
+    put = actions.add_parser("set", help="ask for a lifecycle transition of the part (a system's through the "
+                                         "manager, a node's through its own service)")
+    put.add_argument("part", metavar="PART")
+    put.add_argument("transition", metavar="TRANSITION", help=f"one of {', '.join(REQUESTABLE_LABELS)}")
+    put.add_argument("--wait", action="store_true", help="wait until the part is in the state the transition "
+                                                         "leads to; print how long it took")
+    for child in (get, put):
+        _common(child)
+
+
+def _client(args: argparse.Namespace) -> AbstractContextManager[Any]:
+    from sm_bt.ros.environment import RosUnavailable
+
+    try:
+        from sm_bt.ros.client import ModeClient
+
+        return ModeClient(timeout=args.timeout)
+    except (RosUnavailable, ImportError) as error:
+        raise CliError(str(error)) from None
+
+
+def _translated(args: argparse.Namespace, action: Any) -> int:
+    """Run ``action(client)``: the client's errors become the CLI's (usage error: exit 2)."""
+    from sm_bt.ros.client import ManagerUnreachable, NotConfirmed, UnknownName
+
+    with _client(args) as client:
+        try:
+            result: int = action(client)
+            return result
+        except UnknownName as error:
+            raise UsageError(str(error)) from None
+        except (ManagerUnreachable, NotConfirmed) as error:
+            raise CliError(str(error)) from None
+
+
+def run_mode(args: argparse.Namespace) -> int:
+    part = args.part.lstrip("/")
+
+    def get(client: Any) -> int:
+        mode = client.get_mode(part)
+        print(f"{part}: {mode or '(no mode: not active)'}")
+        return 0
+
+    def listed(client: Any) -> int:
+        for mode in client.available_modes(part):
+            print(mode)
+        return 0
+
+    def put(client: Any) -> int:
+        client.check_mode(part, args.mode)
+        asked = time.monotonic()
+        if not client.change_mode(part, args.mode):
+            raise CliError(f"the manager refused mode {args.mode!r} for {part} (its log says why)")
+        if not args.wait:
+            print(f"{part}: change to {args.mode} accepted")
+            return 0
+        seconds = client.wait_for_mode(part, args.mode, asked)
+        print(f"{part}: {args.mode} confirmed {seconds:.2f} s after the request")
+        return 0
+
+    return _translated(args, {"get": get, "list": listed, "set": put}[args.action])
+
+
+def run_state(args: argparse.Namespace) -> int:
+    part = args.part.lstrip("/")
+
+    def get(client: Any) -> int:
+        print(f"{part}: {client.get_state(part)}")
+        return 0
+
+    def put(client: Any) -> int:
+        asked = time.monotonic()
+        if not client.change_state(part, args.transition):
+            raise CliError(f"{part} refused the transition {args.transition!r} (from {client.get_state(part)})")
+        if not args.wait:
+            print(f"{part}: {args.transition} accepted")
+            return 0
+        seconds = client.wait_for_state(part, args.transition, asked)
+        print(f"{part}: {client.get_state(part)} {seconds:.2f} s after the request")
+        return 0
+
+    return _translated(args, {"get": get, "set": put}[args.action])

@@ -1,0 +1,210 @@
+"""A client of a running mode manager, over the system_modes interface (``sm-bt mode/state ...``).
+
+It speaks only the reference's services and topics, so it commands ``sm-bt manager`` and the
+reference's ``mode_manager`` alike:
+
+* ``/{part}/get_mode``, ``get_available_modes``, ``change_mode`` (system_modes_msgs), served by the
+  manager for every part;
+* ``/{part}/get_state``, ``change_state`` (lifecycle_msgs): the manager's for a system, the
+  node's own for a node;
+* ``/{part}/mode_event`` and ``/{part}/transition_event``: what wakes a wait for confirmation,
+  which then asks ``get_mode``/``get_state`` to be sure (a latched event may be an old one).
+
+Every call has a timeout. Names that nobody serves raise :class:`UnknownName` with the names that
+are served ("did you mean ...?"); no answer at all raises :class:`ManagerUnreachable`, saying what
+to check. One rclpy context and node of its own, spun only inside its calls; :meth:`close` ends
+them.
+"""
+
+from __future__ import annotations
+
+import difflib
+import time
+from collections.abc import Callable
+from typing import Any
+
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
+from sm_bt.ros.environment import prepare, require_ros
+
+#: The state a lifecycle transition (by label) ends in when it succeeds.
+TRANSITION_GOALS = {"configure": "inactive", "activate": "active", "deactivate": "inactive",
+                    "cleanup": "unconfigured", "shutdown": "finalized"}
+#: Discovery time after which a manager that serves other parts, but not the one asked for, means
+#: a wrong name rather than a slow network.
+DISCOVERY_GRACE = 2.0
+#: How often a wait asks get_mode/get_state when no event wakes it (events wake it at once).
+POLL = 0.5
+
+
+class ManagerUnreachable(RuntimeError):
+    """No manager (or node) answers: the message says which service and what to check."""
+
+
+class UnknownName(ValueError):
+    """A part, mode or transition that is not served: the message has the closest served names."""
+
+
+class NotConfirmed(RuntimeError):
+    """A change was accepted but not confirmed in time: the message says where the part is."""
+
+
+def _closest(word: str, served: list[str], what: str) -> str:
+    close = difflib.get_close_matches(word, served, n=1, cutoff=0.6)
+    if close:
+        return f" (did you mean {close[0]!r}?)"
+    return f" ({what}: {', '.join(served)})" if served else ""
+
+
+class ModeClient:
+    """Ask a mode manager over ROS 2; every method waits at most ``timeout`` seconds."""
+
+    def __init__(self, timeout: float = 10.0, node_name: str = "sm_bt_client") -> None:
+        prepare(local_only=False)  # the user's discovery settings: the manager may be on another host
+        require_ros()
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        self.timeout = timeout
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(node_name, context=self.context, start_parameter_services=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._clients: dict[str, Any] = {}
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+    def __enter__(self) -> ModeClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- what is served ------------------------------------------------------------------------------
+
+    def served_parts(self) -> list[str]:
+        """The parts whose ``change_mode`` some manager serves (from the ROS graph)."""
+        return sorted(name[1:-len("/change_mode")] for name, types in self.node.get_service_names_and_types()
+                      if name.endswith("/change_mode") and "system_modes_msgs/srv/ChangeMode" in types)
+
+    def _client(self, service_type: Any, name: str) -> Any:
+        if name not in self._clients:
+            self._clients[name] = self.node.create_client(service_type, name)
+        return self._clients[name]
+
+    def _found(self, client: Any, part: str) -> bool:
+        """Wait for ``client``'s service; :class:`UnknownName` as soon as discovery shows a manager
+        serving other parts but not this one (a typo need not wait for the whole timeout)."""
+        start = time.monotonic()
+        while not client.wait_for_service(timeout_sec=0.25):
+            elapsed = time.monotonic() - start
+            if elapsed >= DISCOVERY_GRACE or elapsed >= self.timeout:
+                served = self.served_parts()
+                if served and part not in served:
+                    raise UnknownName(f"no manager serves the part {part!r}{_closest(part, served, 'parts served')}")
+            if elapsed >= self.timeout:
+                return False
+        return True
+
+    def _call(self, service_type: Any, part: str, service: str, request: Any) -> Any:
+        name = f"/{part}/{service}"
+        client = self._client(service_type, name)
+        if not self._found(client, part):
+            raise ManagerUnreachable(
+                f"nothing answers {name} within {self.timeout:g} s: is a mode manager (`sm-bt manager MODEL`) "
+                "running, with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?")
+        future = client.call_async(request)
+        self.executor.spin_until_future_complete(future, timeout_sec=self.timeout)
+        if not future.done():
+            client.remove_pending_request(future)
+            raise ManagerUnreachable(f"{name} did not answer within {self.timeout:g} s")
+        return future.result()
+
+    # -- modes -----------------------------------------------------------------------------------------
+
+    def get_mode(self, part: str) -> str:
+        """The part's current mode as the manager infers it (``""``: none, e.g. not active)."""
+        from system_modes_msgs.srv import GetMode
+
+        return str(self._call(GetMode, part, "get_mode", GetMode.Request()).current_mode)
+
+    def available_modes(self, part: str) -> list[str]:
+        from system_modes_msgs.srv import GetAvailableModes
+
+        return list(self._call(GetAvailableModes, part, "get_available_modes",
+                               GetAvailableModes.Request()).available_modes)
+
+    def check_mode(self, part: str, mode: str) -> None:
+        """:class:`UnknownName` unless ``mode`` is one of the part's modes."""
+        modes = self.available_modes(part)
+        if mode not in modes and mode != "__DEFAULT__":
+            raise UnknownName(f"{part} has no mode {mode!r}{_closest(mode, modes, 'modes')}")
+
+    def change_mode(self, part: str, mode: str) -> bool:
+        """Ask for ``mode``; whether the manager accepted the request (not that it is done)."""
+        from system_modes_msgs.srv import ChangeMode
+
+        return bool(self._call(ChangeMode, part, "change_mode", ChangeMode.Request(mode_name=mode)).success)
+
+    def wait_for_mode(self, part: str, mode: str, since: float) -> float:
+        """Seconds from ``since`` (``time.monotonic()``) until ``get_mode`` answers ``mode``;
+        :class:`NotConfirmed` after ``timeout``."""
+        from system_modes_msgs.msg import ModeEvent
+
+        return self._wait(ModeEvent, f"/{part}/mode_event", lambda: self.get_mode(part) == mode, since,
+                          lambda: f"{part} is in mode {self.get_mode(part) or '(none)'!r}, not {mode!r}")
+
+    # -- lifecycle states ------------------------------------------------------------------------------
+
+    def get_state(self, part: str) -> str:
+        from lifecycle_msgs.srv import GetState
+
+        return str(self._call(GetState, part, "get_state", GetState.Request()).current_state.label)
+
+    def change_state(self, part: str, transition: str) -> bool:
+        """Ask for a lifecycle transition by label; whether it was accepted."""
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState
+
+        if transition not in REQUESTABLE_LABELS:
+            hint = _closest(transition, list(REQUESTABLE_LABELS), "transitions")
+            raise UnknownName(f"{transition!r} is not a transition{hint}")
+        request = ChangeState.Request(transition=Transition(label=transition))
+        return bool(self._call(ChangeState, part, "change_state", request).success)
+
+    def wait_for_state(self, part: str, transition: str, since: float) -> float:
+        from lifecycle_msgs.msg import TransitionEvent
+
+        goal = TRANSITION_GOALS[transition]
+        return self._wait(TransitionEvent, f"/{part}/transition_event", lambda: self.get_state(part) == goal, since,
+                          lambda: f"{part} is {self.get_state(part)}, not {goal}")
+
+    # -- waiting ---------------------------------------------------------------------------------------
+
+    def _wait(self, message_type: Any, topic: str, reached: Callable[[], bool], since: float,
+              where: Callable[[], str]) -> float:
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        woken: list[Any] = []
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        subscription = self.node.create_subscription(message_type, topic, woken.append, qos)
+        try:
+            deadline = since + self.timeout
+            next_poll = 0.0
+            while True:
+                now = time.monotonic()
+                if woken or now >= next_poll:
+                    woken.clear()
+                    next_poll = now + POLL
+                    if reached():
+                        return time.monotonic() - since
+                if now >= deadline:
+                    raise NotConfirmed(f"not confirmed within {self.timeout:g} s: {where()}")
+                self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - now)))
+        finally:
+            self.node.destroy_subscription(subscription)
