@@ -11,7 +11,7 @@ from typing import Any
 
 from py_trees.common import Status
 
-from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name, seconds
+from sm_bt.behaviours.manager_access import REQUESTER, ManagerBehaviour, require_mode_name, seconds
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
@@ -90,7 +90,7 @@ class ChangeMode(_RequestBehaviour):
         self._check_mode(model, self.part, self.mode)
 
     def _make_request(self, manager: ModeManager) -> Request:
-        return manager.change_mode(self.part, self.mode, timeout=self.timeout)
+        return manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER)
 
 
 class ChangeState(_RequestBehaviour):
@@ -121,7 +121,7 @@ class ChangeState(_RequestBehaviour):
         self._check_part(model, self.part)
 
     def _make_request(self, manager: ModeManager) -> Request:
-        return manager.change_state(self.part, self.transition, timeout=self.timeout)
+        return manager.change_state(self.part, self.transition, timeout=self.timeout, requester=REQUESTER)
 
 
 __all__ = ["TRANSITIONS", "ChangeMode", "ChangeState"]

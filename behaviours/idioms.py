@@ -14,7 +14,7 @@ from py_trees.ports import PortInformation, PortsMixin
 
 from sm_bt.behaviours.change import ChangeMode
 from sm_bt.behaviours.divergence import OnDivergence
-from sm_bt.behaviours.manager_access import ManagerBehaviour, require_mode_name, seconds
+from sm_bt.behaviours.manager_access import REQUESTER, ManagerBehaviour, require_mode_name, seconds
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
@@ -65,7 +65,7 @@ class HoldMode(ManagerBehaviour, register=False):
         """Remember the current target and request the mode."""
         self._previous = self.manager.target(self.part)
         self.restore_request = None
-        self.request = self.manager.change_mode(self.part, self.mode, timeout=self.timeout)
+        self.request = self.manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER)
         self.feedback_message = f"requested {self._held}"
 
     def update(self) -> Status:
@@ -97,7 +97,7 @@ class HoldMode(ManagerBehaviour, register=False):
         previous = self._previous
         if not ours or previous is None or previous == self._held:
             return
-        self.restore_request = self.manager.change_to(self.part, previous)
+        self.restore_request = self.manager.change_to(self.part, previous, requester=REQUESTER)
         restoring = f"restoring {self.part} to {previous}"
         # On FAILURE (the change failed) keep why in the feedback, as every FAILURE does.
         self.feedback_message = f"{request.reason}; {restoring}" if new_status is Status.FAILURE else restoring

@@ -24,6 +24,10 @@ from py_trees.ports import PortInformation, PortsMixin
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import DEFAULT_MODE, Model
 
+#: What sm_bt's behaviours say they are when they ask the manager for a change
+#: (:attr:`~sm_bt.engine.requests.Request.requester`).
+REQUESTER = "tree"
+
 
 class NotSetUp(RuntimeError):
     """A behaviour needed its mode manager and none was given (see the module's three ways)."""

@@ -7,6 +7,7 @@ from typing import Any
 from py_trees.common import Status
 
 from sm_bt.behaviours.change import _RequestBehaviour
+from sm_bt.behaviours.manager_access import REQUESTER
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.types import Model
@@ -41,7 +42,7 @@ class Reconfigure(_RequestBehaviour):
 
     def _make_request(self, manager: ModeManager) -> Request | None:
         """Decide, then request the chosen mode if the part is not already targeted at it."""
-        request = self.reasoner.reconfigure(manager, timeout=self.timeout)
+        request = self.reasoner.reconfigure(manager, timeout=self.timeout, requester=REQUESTER)
         decision = self.reasoner.last_decision
         self.decision_text = decision.explanation if decision is not None else ""
         return request

@@ -36,7 +36,7 @@ from sm_bt.bundled import path as bundled_model
 from sm_bt.engine.clock import Clock
 from sm_bt.engine.events import Cause, Event, EventKind
 from sm_bt.engine.manager import ModeManager
-from sm_bt.engine.requests import Origin, Request
+from sm_bt.engine.requests import Request
 from sm_bt.model.loader import load_model
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart
@@ -45,7 +45,7 @@ from sm_bt.sim import SimBackend
 from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
 from sm_bt.trees.mission_xml import load_tree
-from sm_bt.trees.pilot_actions import BATTERY_OK, NavigateTo, Recharge
+from sm_bt.trees.pilot_actions import BATTERY_OK, CompleteRound, NavigateTo, Recharge, comparison
 from sm_bt.view import View, attach_view
 
 #: What Nav2's parameter files give the nodes before any mode is applied (the pilot's TB3 set-up).
@@ -72,6 +72,8 @@ def mission_root(tree: str, cycles: int, model: Model) -> py_trees.behaviour.Beh
 MANAGER_OPTIONS: dict[str, Any] = {"request_timeout": 10.0, "grace_period": 1.0, "recovery_attempts": 1}
 #: The default laser repair on simulated nodes (world seconds).
 REPAIR_AT = 40.0
+#: The node whose scans fail when the laser breaks.
+LASER_NODE = "laser_resender"
 #: On ROS the default repair comes once the pilot has been in degraded mode this long (world
 #: seconds; on simulated nodes it is 22.2 s). A fixed time cannot do it there: handling the failure
 #: (two grace periods and a recovery) takes about 2.3 s of real time, i.e. 2.3 x speed seconds of
@@ -94,7 +96,7 @@ class Options:
     laser_failure_at: float | None = 15.0  # world seconds
     laser_repair_at: float | Auto | None = Auto.AUTO  # world seconds, never, or the default (Auto)
     cycles: int = 2
-    speed: float = 25.0  # world seconds per wall second (simulated: 0 = as fast as possible)
+    speed: float = 35.0  # world seconds per wall second (simulated: 0 = as fast as possible)
     quiet: bool = False
     tree: str = "pilot"
     tick: float = 0.1  # virtual seconds between ticks (simulated platform)
@@ -191,6 +193,7 @@ class Story:
 
     requests: list[Request] = field(default_factory=list)
     waypoints: int = 0
+    rounds: int = 0
     recharges: int = 0
     modes: list[tuple[float, str]] = field(default_factory=list)
     gave_up: list[str] = field(default_factory=list)
@@ -211,6 +214,11 @@ class Demo:
         self._started = 0.0  # the manager's clock when the run starts
         self._wall_started = time.monotonic()
         self._lock = threading.Lock()  # on ROS, manager events come from the clock's thread
+        # Manager events during a tick wait until the tree's own news of that tick (a waypoint,
+        # the battery) is told: that news is what made the tree ask.
+        self._held: list[tuple[str, str]] | None = None
+        self._diverged: set[str] = set()  # nodes told to have left their target, until back
+        self._laser_state = State.UNKNOWN
         self.platform: Platform = ros_platform(self.model, self.world, options, self.note) if options.ros \
             else SimulatedPlatform(self.model, self.world, options)
         try:
@@ -276,20 +284,37 @@ class Demo:
     # -- narrative -----------------------------------------------------------------------------
 
     def say(self, text: str, style: str = "") -> None:
-        if not self.options.quiet:
-            self.console.print(f"{self.stamp()} {text}", style=style or None, markup=False)
+        if self.options.quiet:
+            return
+        line = f"{self.stamp()} {text}"
+        with self._lock:
+            if self._held is not None:
+                self._held.append((line, style))
+                return
+        self.console.print(line, style=style or None, markup=False, soft_wrap=True)
+
+    def _hold(self) -> None:
+        with self._lock:
+            self._held = []
+
+    def _release(self) -> None:
+        with self._lock:
+            held, self._held = self._held or [], None
+        for line, style in held:
+            self.console.print(line, style=style or None, markup=False, soft_wrap=True)
 
     def note(self, text: str) -> None:
         """A line about setting the platform up (before the run's clock starts)."""
         if not self.options.quiet:
-            self.console.print(f"[{time.monotonic() - self._wall_started:6.2f} s wall] {text}", markup=False)
+            self.console.print(f"[{time.monotonic() - self._wall_started:6.2f} s wall] {text}", markup=False,
+                               soft_wrap=True)
 
     def _narrate(self, event: Event) -> None:
         request = event.request
         if event.kind is EventKind.REQUEST and request is not None:
             if not request.done:
                 self.story.requests.append(request)
-                self.say(f"-> {event.message} [{request.origin.value}]", "cyan")
+                self.say(f"-> {event.message} [{request.requester}]", "cyan")
             else:
                 self.say(f"<- {event.message}", "green" if request.succeeded else "red")
         elif event.kind is EventKind.FAILED:
@@ -297,13 +322,26 @@ class Demo:
             self.say(f"!! {event.message}", "bold red")
         elif event.kind is EventKind.RULE:
             self.say(f"!! {event.message}", "magenta")
-        elif event.kind is EventKind.DIVERGENCE and event.divergence is not None \
-                and event.divergence.cause is Cause.FAULT \
-                and isinstance(self.model.parts.get(event.part), NodePart):
-            self.say(f"~~ {event.part} left its target: {event.divergence.target} wanted, "
-                     f"{event.divergence.actual} reported", "yellow")
+        elif event.kind is EventKind.DIVERGENCE and isinstance(self.model.parts.get(event.part), NodePart):
+            divergence = event.divergence
+            if divergence is None:
+                self._diverged.discard(event.part)
+            elif divergence.cause is Cause.FAULT and event.part not in self._diverged:
+                self._diverged.add(event.part)  # told once per departure, not per change of its reason
+                self.say(f"~~ {event.part} left its target: {divergence.target} wanted, "
+                         f"{divergence.actual} reported", "yellow")
         elif event.kind is EventKind.ACTUAL and event.part == pilot.SYSTEM:
             self._pilot_changed(event)
+        elif event.kind is EventKind.ACTUAL and event.part == LASER_NODE and event.actual is not None:
+            self._laser_node_changed(event.actual.state)
+
+    def _laser_node_changed(self, state: State) -> None:
+        """Tell when the laser's node falls out of active by itself: the cause of what follows."""
+        was, self._laser_state = self._laser_state, state
+        target = self.manager.target(LASER_NODE)
+        if was is State.ACTIVE and state is not State.ACTIVE and target is not None \
+                and target.state is State.ACTIVE:  # not a change the manager is making
+            self.say(f"{LASER_NODE} fails by itself: no longer active ({state.label})", "bold")
 
     def _pilot_changed(self, event: Event) -> None:
         actual = event.actual
@@ -315,7 +353,8 @@ class Demo:
                 self._key_moment = actual.mode
 
     def _after_tick(self) -> None:
-        """Tell what the tree did: waypoints, recharges, battery, contingencies."""
+        """Tell what the tree saw and did (waypoints, recharges, battery), then what it asked of
+        the manager meanwhile, then the mode reached."""
         for behaviour in self.root.iterate():
             old = self._statuses.get(behaviour, Status.INVALID)
             new = behaviour.status
@@ -324,17 +363,21 @@ class Demo:
                 continue
             if isinstance(behaviour, NavigateTo):
                 self.story.waypoints += behaviour.waypoint != "recharge_station"
-                self.say(f"robot at {behaviour.waypoint} ({self.world.odometer:.1f} m driven, "
-                         f"battery {self.world.battery:.2f})")
+                self._tell(f"robot at {behaviour.waypoint} ({self.world.odometer:.1f} m driven, "
+                           f"battery {self.world.battery:.2f})")
+            elif isinstance(behaviour, CompleteRound):
+                self.story.rounds = self.world.rounds
+                self._tell(f"patrol round {self.world.rounds} of {self.options.cycles} complete")
             elif isinstance(behaviour, Recharge):
                 self.story.recharges += 1
-                self.say("recharged: battery 1.00")
-        # The tree's battery monitor decides when the battery is low or recovered.
+                self._tell("recharged: battery 1.00")
+        # The tree's battery monitor says when the battery is low (below 0.5) or recovered.
         battery_ok = Blackboard.get(BATTERY_OK) if Blackboard.exists(BATTERY_OK) else True
         if battery_ok != self._battery_ok:
             self._battery_ok = battery_ok
-            self.say("battery recovered" if battery_ok else f"battery low ({self.world.battery:.2f}): "
-                     "contingency", "bold")
+            self._tell("battery recovered" if battery_ok else
+                       f"battery low ({comparison(self.world.battery, pilot.BATTERY_LOW)})", "bold")
+        self._release()
         with self._lock:
             mode, self._key_moment = self._key_moment, ""
         if mode:
@@ -343,13 +386,20 @@ class Demo:
                 self._shown_modes.add(mode)
                 self.show()
 
+    def _tell(self, text: str, style: str = "") -> None:
+        """Say ``text`` ahead of the manager events held during the tick."""
+        if not self.options.quiet:
+            self.console.print(f"{self.stamp()} {text}", style=style or None, markup=False, soft_wrap=True)
+
     def show(self) -> None:
         """The mode monitor and the part of the tree ticked last."""
         if self.options.quiet:
             return
         self.monitor.print_table()
+        # Status and feedback for what this tick visited only: a finished behaviour's last
+        # feedback is history, not news (py_trees marks a subtree left while running, without it).
         self.console.print(py_trees.display.unicode_tree(
-            self.root, show_only_visited=True, show_status=True, visited=self.snapshot.visited,
+            self.root, show_only_visited=True, show_status=False, visited=self.snapshot.visited,
             previously_visited=self.snapshot.previously_visited), markup=False, highlight=False)
 
     # -- the run -------------------------------------------------------------------------------
@@ -378,8 +428,8 @@ class Demo:
         if self._broken_at is None and options.laser_failure_at is not None and options.laser_failure_at <= now \
                 and not self._repair_due(now):
             self._broken_at = now
-            self.say("laser failure: all-zero scans; laser_resender deactivates itself "
-                     "(on_deactivate ERROR -> errorprocessing -> unconfigured)", "bold")
+            self.say("laser failure: the scans are all zero (laser_resender deactivates itself: on_deactivate "
+                     "ERROR -> errorprocessing -> unconfigured)", "bold")
             self.platform.break_laser()
         elif not self.world.laser_ok and self._repair_due(now):
             self.say("laser repaired: scans healthy again", "bold")
@@ -397,15 +447,18 @@ class Demo:
             (f", world time {self.world.time_scale:g}x the wall clock" if self.on_wall_clock else "")
         started = time.monotonic()
         self._started = self.clock.now()
-        self.say(f"MROS pilot mission ({self.options.tree} tree){where}, {self.options.cycles} patrol cycle(s); "
+        self.say(f"MROS pilot mission ({self.options.tree} tree){where}, {self.options.cycles} patrol round(s); "
                  f"robot at {self.world.position}, battery {self.world.battery:.2f}")
         while self.root.status is not Status.SUCCESS and self.root.status is not Status.FAILURE:
             now = self.world_now()
             if now > self.options.limit:
                 break
             self._world_events(now)
-            self.tree.tick()
-            self._after_tick()
+            self._hold()
+            try:
+                self.tree.tick()
+            finally:
+                self._after_tick()
             self.platform.advance(self.platform.tick)
         self.say(f"mission {self.root.status.value}")
         self.final_mode = str(self.manager.actual(pilot.SYSTEM))
@@ -425,32 +478,38 @@ class Demo:
     def summary(self, wall: float) -> int:
         out = self.console
         unit = " wall" if self.on_wall_clock else ""  # the manager's clock: the requests' times
-        out.print()
+        if not self.options.quiet:
+            out.print()
         out.print("Summary", style="bold")
         if self.on_wall_clock:
             duration = f"{self.world_now():.1f} s of world time ({wall:.1f} s wall, world {self.world.time_scale:g}x)"
         else:
             duration = f"{self.clock.now():.1f} s of virtual time ({wall:.1f} s wall)"
         out.print(f"  mission {self.root.status.value} after {duration}; {self.world.odometer:.1f} m driven, "
-                  f"{self.story.waypoints} waypoints, {self.story.recharges} recharge(s)", markup=False)
+                  f"{self.story.rounds} patrol round(s) ({self.story.waypoints} waypoints), "
+                  f"{self.story.recharges} recharge(s)", markup=False, soft_wrap=True)
         modes = " -> ".join(f"{mode} ({at:.1f} s{unit})" for at, mode in self.story.modes)
-        out.print(f"  pilot modes: {modes}", markup=False)
-        by_origin = {origin: [r for r in self.story.requests if r.origin is origin] for origin in Origin}
-        for origin, requests in by_origin.items():
-            if not requests:
-                continue
+        out.print(f"  pilot modes: {modes}", markup=False, soft_wrap=True)
+        by_requester: dict[str, list[Request]] = {}  # in the order each first asked
+        for request in self.story.requests:
+            by_requester.setdefault(request.requester, []).append(request)
+        for requester, requests in by_requester.items():
             ok = [r for r in requests if r.succeeded]
             times = [r.elapsed for r in ok if r.elapsed is not None]
             mean = f", confirmed in {sum(times) / len(times):.2f} s{unit} on average" if times else ""
-            out.print(f"  {origin.value} requests: {len(ok)} of {len(requests)} succeeded{mean}", markup=False)
+            out.print(f"  {requester} requests: {len(ok)} of {len(requests)} succeeded{mean}", markup=False,
+                      soft_wrap=True)
             for request in requests:
                 if not request.succeeded:
-                    out.print(f"    #{request.id} {request.description}: {request.reason}", markup=False)
+                    out.print(f"    #{request.id} {request.description}: {request.reason}", markup=False,
+                              soft_wrap=True)
         if self.story.gave_up:
-            out.print(f"  recovery gave up on: {', '.join(self.story.gave_up)} (left to the tree)", markup=False)
+            out.print(f"  recovery gave up on: {', '.join(self.story.gave_up)} (left to the tree)", markup=False,
+                      soft_wrap=True)
         final = self.final_mode or str(self.manager.actual(pilot.SYSTEM))
         expected = self.expected_mode()
         good = self.root.status is Status.SUCCESS and final == expected
         verdict = "as expected" if good else f"NOT as expected ({expected} and a successful mission wanted)"
-        out.print(f"  pilot ends in {final}; {verdict}", style=None if good else "bold red", markup=False)
+        out.print(f"  pilot ends in {final}; {verdict}", style=None if good else "bold red", markup=False,
+                  soft_wrap=True)
         return 0 if good else 1

@@ -285,16 +285,18 @@ class Reasoner:
                    f"which violates {', '.join(self.objective.violations(chosen))}")
         return Decision(chosen, names, meeting_names, f"{prefix}: {why}", failed)
 
-    def reconfigure(self, manager: ModeManager, *, timeout: float | None = None) -> Request | None:
+    def reconfigure(self, manager: ModeManager, *, timeout: float | None = None,
+                    requester: str = "reasoner") -> Request | None:
         """Decide, and ask ``manager`` for the chosen mode of the part unless its target already
         is that mode (active). ``None`` when there is nothing to do or nothing realisable
-        (``last_decision`` says which). ``timeout`` bounds the change (``None``: the manager's)."""
+        (``last_decision`` says which). ``timeout`` bounds the change (``None``: the manager's);
+        ``requester`` names who asks (:attr:`Request.requester`)."""
         decision = self.decide()
         if decision.design is None:
             return None
         if manager.target(self.part) == StateMode(State.ACTIVE, decision.design.mode):
             return None
-        return manager.change_mode(self.part, decision.design.mode, timeout=timeout)
+        return manager.change_mode(self.part, decision.design.mode, timeout=timeout, requester=requester)
 
     def check(self, model: Model) -> None:
         """Raise ``ValueError`` unless ``model`` has the part and every design's mode is a mode

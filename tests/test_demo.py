@@ -26,15 +26,88 @@ def test_demo_tells_the_whole_story(tree: str) -> None:
     code, text, demo = run_demo(tree=tree)
     assert code == 0, text
     story = PILOT_DEMO_STORY
-    # Two cycles: the robot drives to the station, and normal mode comes back after the recharge.
+    # Two rounds: the robot drives to the station, and normal mode comes back after the recharge.
     assert_in_order(text, ["robot at recharge_station", "recharged: battery 1.00",
                            "== pilot is now active.f_normal_mode ==", "mission SUCCESS"])
     assert_in_order(text, story)
     # The monitor table and the tree are shown at key moments.
     assert re.search(r"pilot\s+active\s+active\(\*\)\s+f_degraded_mode\s+f_degraded_mode\(\*\)", text)
     assert "Patrol with contingencies" in text or "Patrol under metacontrol" in text
-    # A whole patrol and both recharges happened.
-    assert demo.story.waypoints >= 7 and demo.story.recharges == 2
+    # Both rounds, every waypoint of each, ending at the last one; a recharge is not a round.
+    assert (demo.story.rounds, demo.story.waypoints) == (2, 14) and demo.story.recharges >= 2
+    assert_in_order(text, ["robot at wp_7", "patrol round 2 of 2 complete", "mission SUCCESS"])
+
+
+Line = tuple[float, str]
+
+
+def narrative(text: str) -> list[Line]:
+    """The demo's time-stamped lines, as (seconds, text)."""
+    return [(float(m.group(1)), m.group(2)) for m in re.finditer(r"^\[\s*([\d.]+) s\] (.*)$", text, re.M)]
+
+
+def first(lines: list[Line], pattern: str, start: int = 0) -> int:
+    return next(i for i in range(start, len(lines)) if re.search(pattern, lines[i][1]))
+
+
+@pytest.mark.parametrize("tree", ["pilot", "metacontrol"])
+def test_the_narration_is_true_in_causal_order_and_names_who_asked(tree: str) -> None:
+    code, text, _ = run_demo(tree=tree)
+    assert code == 0, text
+    lines = narrative(text)
+    assert [at for at, _ in lines] == sorted(at for at, _ in lines)  # never back in time
+    said = [line for _, line in lines]
+    started = {m.group(1): (i, m.group(2), m.group(3)) for i, line in enumerate(said)
+               if (m := re.match(r"-> #(\d+) (.*) started \[(\w+)\]$", line))}
+    assert started
+    for number, (index, description, requester) in started.items():
+        # The tree asks for the pilot's modes and states; recovery restores the laser node.
+        assert requester == ("recovery" if description.startswith("restore ") else "tree"), said[index]
+        done = [i for i, line in enumerate(said) if line.startswith(f"<- #{number} ")]
+        assert len(done) == 1 and done[0] > index, f"#{number}: {done}"
+    # Each request has its cause just before it, and each effect comes after its cause.
+    for index, description, _ in started.values():
+        cause = said[index - 1]
+        if description.endswith("f_energy_saving_mode"):
+            assert cause.startswith("battery low ("), cause
+        elif description == "change_mode pilot f_degraded_mode":
+            assert cause.startswith("!! gave up restoring laser_resender"), cause
+        elif description.startswith("restore laser_resender"):
+            assert cause.startswith("~~ laser_resender left its target"), cause
+        elif description in ("change_to pilot active.f_normal_mode", "change_mode pilot f_normal_mode") \
+                and index > 5:
+            assert cause.startswith(("recharged", "laser repaired", "battery recovered")), cause
+    for index, line in enumerate(said):
+        if line.startswith("~~ laser_resender left its target"):
+            since = max(i for i in range(index) if said[i].startswith(("laser failure", "<- #")))
+            assert any(said[i].startswith("laser_resender fails by itself") for i in range(since, index)), \
+                said[since:index + 1]
+        if m := re.match(r"== pilot is now active\.(\w+) ==", line):
+            last_done = max(i for i in range(index) if said[i].startswith("<- #"))
+            assert said[last_done].endswith("succeeded in " + said[last_done].rsplit("in ", 1)[1])
+            assert m.group(1) in said[last_done], (said[last_done], line)
+    # The summary counts what was told.
+    summary = text[text.index("\nSummary"):]
+    waypoints = sum(1 for line in said if re.match(r"robot at wp_\d", line))
+    recharges = sum(1 for line in said if line.startswith("recharged:"))
+    rounds = sum(1 for line in said if re.match(r"patrol round \d of 2 complete", line))
+    assert f"2 patrol round(s) ({waypoints} waypoints), {recharges} recharge(s)" in summary
+    assert (rounds, waypoints) == (2, 14)
+    asked = {requester: sum(1 for _, _, r in started.values() if r == requester) for requester in ("tree", "recovery")}
+    assert f"tree requests: {asked['tree']} of {asked['tree']} succeeded" in summary
+    assert f"recovery requests: {asked['recovery']} of {asked['recovery']} succeeded" in summary
+    assert "user requests" not in summary
+
+
+def test_tree_dumps_show_feedback_only_for_what_the_tick_visited_and_conditions_in_words() -> None:
+    _, text, _ = run_demo(tree="pilot")
+    dumps = [line for line in text.splitlines() if re.match(r"^\s*(-->|\[o\]|\[-\]|\{-\}|\{o\}|/_/|-\^-) ", line)]
+    assert dumps
+    for line in dumps:
+        # A status marker goes with every feedback message: a behaviour not ticked shows none.
+        assert " -- " not in line or re.search(r"\[[*✓✕-]\] -- ", line), line
+    assert not [line for line in dumps if " is True" in line or " is False" in line]
+    assert any(re.search(r"Battery OK\? \[✓\] -- battery level 0\.\d\d ≥ 0\.5", line) for line in dumps)
 
 
 def test_degraded_mode_slows_the_robot_down() -> None:
@@ -101,3 +174,21 @@ def test_a_tree_file_with_mistakes_is_an_error_with_its_lines(capsys: pytest.Cap
     _, err = capsys.readouterr()
     assert err.startswith(f"{bad}:3: error: <ChangeMode 'ChangeMode'>: pilot has no mode 'f_fast'")
     assert "Traceback" not in err
+
+
+def test_the_demo_piped_to_a_file_is_plain_unwrapped_text(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    out = tmp_path / "demo.txt"
+    with out.open("w") as file:
+        done = subprocess.run([sys.executable, "-m", "sm_bt.cli", "demo", "--speed", "0", "--cycles", "1"],
+                              stdout=file, stderr=subprocess.PIPE, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    lines = out.read_text(encoding="utf-8").splitlines()
+    assert not [line for line in lines if "\x1b" in line]  # no colour codes
+    assert not [line for line in lines if line != line.rstrip()]  # no trailing spaces
+    # Long lines stay whole: the failure line and the summary's modes are longer than any terminal width.
+    summary_modes = next(line for line in lines if line.startswith("  pilot modes: "))
+    assert len(summary_modes) > 120 and summary_modes.endswith(")")
+    assert any(len(line) > 120 and line.endswith("-> unconfigured)") for line in lines)

@@ -14,7 +14,7 @@ from sm_bt.engine.events import Event
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model
 from sm_bt.sim import SimBackend
-from sm_bt.sim.world import LaserDevice, World
+from sm_bt.sim.world import PATROL, LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
 from sm_bt.trees.mission_xml import load_tree
 from sm_bt.trees.pilot_actions import NavigateTo, Recharge
@@ -125,6 +125,7 @@ def test_battery_low_energy_saving_recharge_and_back_to_normal(tree: str) -> Non
     mission = Mission(tree)
     mission.until(lambda: mission.pilot == "active.f_normal_mode")
     mission.until(lambda: mission.world.battery < 0.5)
+    resume_at = next_waypoint(mission)
     mission.until(lambda: mission.pilot == "active.f_energy_saving_mode", limit=2.0)
     assert mission.controller() == CONTROLLER["SLOW"]
     mission.until(lambda: mission.navigating_to() == ["recharge_station"], limit=2.0)
@@ -132,7 +133,15 @@ def test_battery_low_energy_saving_recharge_and_back_to_normal(tree: str) -> Non
     assert mission.world.distance_to("recharge_station") < 1e-6
     mission.until(lambda: mission.pilot == "active.f_normal_mode", limit=2.0)
     assert mission.controller() == CONTROLLER["DEFAULT"]
-    mission.until(lambda: mission.navigating_to() == ["wp_1"], limit=2.0)
+    # The round goes on where it was: a recharge neither restarts nor ends it.
+    assert resume_at != "wp_1"
+    mission.until(lambda: mission.navigating_to() == [resume_at], limit=2.0)
+    assert mission.world.rounds == 0
+
+
+def next_waypoint(mission: Mission) -> str:
+    """The first waypoint of the round not visited yet."""
+    return next(wp for wp in PATROL if wp not in mission.world.visited)
 
 
 @pytest.mark.parametrize("tree", sorted(TREES))
@@ -142,11 +151,12 @@ def test_battery_low_while_degraded_recharges_without_the_laser(tree: str) -> No
     mission.laser.break_laser()
     mission.until(lambda: mission.pilot == "active.f_degraded_mode", limit=10.0)
     mission.world.battery = 0.49
+    resume_at = next_waypoint(mission)
     mission.until(lambda: mission.navigating_to() == ["recharge_station"], limit=2.0)
     # Energy saving needs the laser: the robot recharges in degraded mode.
     assert mission.pilot == "active.f_degraded_mode"
     mission.until(lambda: mission.world.battery == 1.0)
-    mission.until(lambda: mission.navigating_to() == ["wp_1"], limit=2.0)
+    mission.until(lambda: mission.navigating_to() == [resume_at], limit=2.0)
     assert mission.pilot == "active.f_degraded_mode"
 
 
@@ -181,7 +191,7 @@ def test_metacontrol_explains_its_choices() -> None:
 def test_trees_render_with_py_trees_display(tree: str) -> None:
     root = TREES[tree](2)
     text = py_trees.display.unicode_tree(root)
-    assert "Patrolling" in text and "To wp_7" in text
+    assert "Patrol round" in text and "To wp_7" in text
     dot = py_trees.display.dot_tree(root).to_string()
     assert "digraph" in dot and "wp_7" in dot
     assert "Recharg" in py_trees.display.xhtml_tree(root)

@@ -131,7 +131,7 @@ def assert_in_order(text: str, lines: Sequence[str]) -> None:
 PILOT_DEMO_STORY = (
     "change_state pilot configure succeeded",
     "== pilot is now active.f_normal_mode ==",
-    "laser failure: all-zero scans",
+    "laser failure: the scans are all zero",
     "restore laser_resender to active.__DEFAULT__ started [recovery]",
     "gave up restoring laser_resender",
     "change_mode pilot f_degraded_mode succeeded",

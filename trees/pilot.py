@@ -1,13 +1,14 @@
 """The MROS pilot mission, with its contingencies handled in the tree.
 
-Patrol seven waypoints; when the battery runs low, recharge in energy-saving mode; repeat. The
-tree reconfigures the robot only by asking for modes of the ``pilot`` system:
+Patrol seven waypoints, ``cycles`` rounds; whenever the battery runs low, recharge in
+energy-saving mode and carry on where the round was (a recharge is not a round). The tree
+reconfigures the robot only by asking for modes of the ``pilot`` system:
 
 * start-up: configure, then ``f_normal_mode``
 * laser failure (laser_resender leaves its target by itself) -> ``f_degraded_mode``
 * laser scans healthy again while degraded -> ``f_normal_mode``
-* battery low -> recharge while holding ``f_energy_saving_mode`` (or in degraded mode, which
-  has no laser to spare); battery recovered -> the previous mode comes back
+* battery below 0.5 -> recharge while holding ``f_energy_saving_mode`` (or in degraded mode,
+  which has no laser to spare); recharged -> the previous mode comes back
 
 Set it up with ``tree.setup(manager=ModeManager(load_model(...pilot...), backend), world=World())``.
 """
@@ -29,13 +30,16 @@ from sm_bt.behaviours import (
 )
 from sm_bt.sim.world import PATROL
 from sm_bt.trees.pilot_actions import (
-    BATTERY_OK,
+    BATTERY_LEVEL,
     LASER_SCANS_OK,
     BatteryToBlackboard,
+    CompleteRound,
     FlagIs,
+    LevelAtLeast,
     NavigateTo,
     Recharge,
     ScansToBlackboard,
+    Visited,
 )
 
 #: The same mission in BehaviorTree.CPP-style XML (:func:`sm_bt.trees.mission_xml.load_tree`).
@@ -45,6 +49,8 @@ SYSTEM = "pilot"
 NORMAL = "f_normal_mode"
 DEGRADED = "f_degraded_mode"
 ENERGY_SAVING = "f_energy_saving_mode"
+#: Below this battery level the robot recharges before it drives on.
+BATTERY_LOW = 0.5
 
 
 def is_true(name: str, key: str, value: bool) -> Behaviour:
@@ -69,30 +75,39 @@ def go_and_recharge(suffix: str = "") -> Behaviour:
 
 
 def recharge() -> Behaviour:
-    """Battery low: recharge. In energy-saving mode unless degraded (the laser is broken)."""
-    return py_trees.composites.Sequence("Recharging", memory=True, children=[
-        is_true("Battery low?", BATTERY_OK, False),
-        py_trees.composites.Selector("Recharge in a mode", memory=True, children=[
-            py_trees.composites.Sequence("Recharge degraded", memory=True, children=[
-                ModeIs("Degraded?", SYSTEM, DEGRADED),
-                go_and_recharge(" (degraded)"),
-            ]),
-            hold_mode("Energy saving", SYSTEM, ENERGY_SAVING, go_and_recharge()),
+    """Recharge: in energy-saving mode, unless degraded (the laser is broken)."""
+    return py_trees.composites.Selector("Recharging", memory=True, children=[
+        py_trees.composites.Sequence("Recharge degraded", memory=True, children=[
+            ModeIs("Degraded?", SYSTEM, DEGRADED),
+            go_and_recharge(" (degraded)"),
         ]),
+        hold_mode("Energy saving", SYSTEM, ENERGY_SAVING, go_and_recharge()),
     ])
 
 
-def patrolling() -> Behaviour:
-    """Visit the seven waypoints in order."""
-    return py_trees.composites.Sequence("Patrolling", memory=True, children=[
-        NavigateTo(f"To {wp}", wp) for wp in PATROL
+def patrol_round(recharging: Behaviour) -> Behaviour:
+    """One round of the seven waypoints, with ``recharging`` first whenever the battery is low.
+
+    Memoryless, so the battery is checked at every tick; each leg is skipped once visited in
+    this round, so that after a recharge the round goes on where it was (py_trees' idiom of a
+    condition before its action)."""
+    legs = [py_trees.composites.Selector(wp, memory=False, children=[
+        Visited(f"Visited {wp}?", wp),
+        NavigateTo(f"To {wp}", wp),
+    ]) for wp in PATROL]
+    return py_trees.composites.Sequence("Patrol round", memory=False, children=[
+        py_trees.composites.Selector("Battery", memory=False, children=[
+            LevelAtLeast("Battery OK?", BATTERY_LEVEL, BATTERY_LOW),
+            recharging,
+        ]),
+        *legs,
+        CompleteRound("Round complete"),
     ])
 
 
-def patrol(cycles: int) -> Behaviour:
-    """``cycles`` rounds of: recharge if the battery is low, else patrol."""
-    either = py_trees.composites.Selector("Patrol or recharge", memory=False, children=[recharge(), patrolling()])
-    return py_trees.decorators.Repeat("Patrol", child=either, num_success=cycles)
+def patrol(cycles: int, recharging: Behaviour | None = None) -> Behaviour:
+    """``cycles`` patrol rounds (:func:`patrol_round`); ``recharging`` defaults to :func:`recharge`."""
+    return py_trees.decorators.Repeat("Patrol", child=patrol_round(recharging or recharge()), num_success=cycles)
 
 
 def contingencies() -> Behaviour:
@@ -110,7 +125,7 @@ def contingencies() -> Behaviour:
 
 
 def create_root(cycles: int = 2) -> Behaviour:
-    """The pilot mission: ``cycles`` rounds of patrol-or-recharge, then SUCCESS."""
+    """The pilot mission: ``cycles`` patrol rounds (recharging as needed), then SUCCESS."""
     start_up = py_trees.composites.Sequence("Start-up", memory=True, children=[
         ChangeState("Configure", SYSTEM, "configure"),
         ChangeMode(NORMAL, SYSTEM, NORMAL),

@@ -110,6 +110,32 @@ class NavigateTo(_WorldBehaviour):
         return Status.RUNNING
 
 
+class Visited(_WorldBehaviour):
+    """Has the robot reached ``waypoint`` in this patrol round? SUCCESS if it has, FAILURE if
+    not; never RUNNING. Before a :class:`NavigateTo`, it lets a patrol interrupted by a recharge
+    carry on where it was."""
+
+    def __init__(self, name: str, waypoint: str, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self.waypoint = waypoint
+
+    def update(self) -> Status:
+        if self.waypoint in self.world.visited:
+            self.feedback_message = f"{self.waypoint} visited"
+            return Status.SUCCESS
+        self.feedback_message = f"{self.waypoint} not visited yet"
+        return Status.FAILURE
+
+
+class CompleteRound(_WorldBehaviour):
+    """The end of a patrol round: count it and forget the waypoints visited. Always SUCCESS."""
+
+    def update(self) -> Status:
+        self.world.new_round()
+        self.feedback_message = f"round {self.world.rounds} complete"
+        return Status.SUCCESS
+
+
 class Recharge(_WorldBehaviour):
     """Charge for ``duration`` seconds of world time (the pilot's 10 s), then the battery is full.
 
@@ -177,6 +203,57 @@ class ScansToBlackboard(_WorldBehaviour):
         return Status.SUCCESS
 
 
+def comparison(value: float, threshold: float) -> str:
+    """``0.61 ≥ 0.5`` or ``0.497 < 0.5``: two decimals, or as many as the comparison needs to
+    read true (0.4996 is not ``0.50 < 0.5``)."""
+    sign = "≥" if value >= threshold else "<"
+    for digits in range(2, 7):
+        text = f"{value:.{digits}f}"
+        if (float(text) >= threshold) == (value >= threshold):
+            break
+    return f"{text} {sign} {threshold:g}"
+
+
+def _words(key: str) -> str:
+    """A blackboard key as a reader says it: ``/battery/level`` -> ``battery level``."""
+    return key.strip("/").replace("/", " ").replace("_", " ")
+
+
+class LevelAtLeast(PortsMixin, py_trees.behaviour.Behaviour):
+    """Is the number at blackboard ``key`` at least ``threshold``? SUCCESS if it is, FAILURE if
+    it is below (or nothing was written yet); never RUNNING. The feedback is the comparison as a
+    person reads it (``battery level 0.48 < 0.5``). In XML
+    ``<LevelAtLeast name="Battery OK?" key="/battery/level" threshold="0.5"/>``."""
+
+    INPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012 (py_trees' read-only declaration)
+    OUTPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012
+
+    def __init__(self, name: str, key: str, threshold: float | str, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        try:
+            self.threshold = float(threshold)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}: threshold must be a number, not {threshold!r}") from None
+        self.key = key
+        self.blackboard = self.attach_blackboard_client(name)
+        self.blackboard.register_key(key, access=Access.READ)
+
+    def setup_ports(self, port_remappings: dict[str, str] | None = None, subtree_namespace: str = "/",
+                    logger: Any = None) -> None:
+        if port_remappings:
+            raise KeyError(f"{self.name}: no ports (given: {', '.join(port_remappings)})")
+        self._subtree_namespace = subtree_namespace
+
+    def update(self) -> Status:
+        """SUCCESS when the value is at least the threshold, FAILURE otherwise."""
+        value = self.blackboard.get(self.key) if self.blackboard.exists(self.key) else None
+        if not isinstance(value, int | float) or isinstance(value, bool):
+            self.feedback_message = f"no {_words(self.key)} yet"
+            return Status.FAILURE
+        self.feedback_message = f"{_words(self.key)} {comparison(value, self.threshold)}"
+        return Status.SUCCESS if value >= self.threshold else Status.FAILURE
+
+
 class FlagIs(PortsMixin, py_trees.behaviour.Behaviour):
     """Does the boolean blackboard variable ``key`` hold ``value``? SUCCESS if it does,
     FAILURE if not (or if nothing was written yet); never RUNNING. In XML
@@ -201,5 +278,10 @@ class FlagIs(PortsMixin, py_trees.behaviour.Behaviour):
     def update(self) -> Status:
         """SUCCESS when ``key`` is ``value``, FAILURE otherwise."""
         current = self.blackboard.get(self.key) if self.blackboard.exists(self.key) else None
-        self.feedback_message = f"{self.key} is {current}"
+        if current is None:
+            self.feedback_message = f"no {_words(self.key)} yet"
+        elif self.key.startswith("/components/") and isinstance(current, bool):  # True = component OK
+            self.feedback_message = f"{_words(self.key[len('/components/'):])} {'OK' if current else 'failed'}"
+        else:
+            self.feedback_message = f"{_words(self.key)} is {current}"
         return Status.SUCCESS if current is self.value else Status.FAILURE

@@ -18,7 +18,7 @@ from sm_bt.behaviours import ChangeState, ManagerBehaviour, Reconfigure
 from sm_bt.model.types import Model
 from sm_bt.reasoner import Reasoner, pilot_reasoner
 from sm_bt.trees import pilot
-from sm_bt.trees.pilot import SYSTEM, go_and_recharge, is_true, patrolling
+from sm_bt.trees.pilot import SYSTEM, go_and_recharge, patrol
 from sm_bt.trees.pilot_actions import BATTERY_OK, LASER_SCANS_OK
 
 
@@ -99,20 +99,14 @@ def create_root(cycles: int = 2, reasoner: Reasoner | None = None) -> Behaviour:
             py_trees.behaviours.Success("Grounded (final)"),
         ]),
     ])
-    either = py_trees.composites.Selector("Patrol or recharge", memory=False, children=[
-        py_trees.composites.Sequence("Recharging", memory=True, children=[
-            is_true("Battery low?", BATTERY_OK, False),
-            go_and_recharge(),
-        ]),
-        patrolling(),
-    ])
-    patrol = py_trees.decorators.Repeat("Patrol", child=either, num_success=cycles)
+    # The reasoner picks the recharge's mode (the battery failed): the tree only goes and recharges.
+    patrolling = patrol(cycles, recharging=go_and_recharge())
     mission = py_trees.composites.Sequence("Mission", memory=True, children=[
         ChangeState("Configure", SYSTEM, "configure"),
         py_trees.composites.Parallel(
             "Patrol under metacontrol",
-            policy=py_trees.common.ParallelPolicy.SuccessOnSelected([patrol], synchronise=False),
-            children=[metacontroller, patrol],
+            policy=py_trees.common.ParallelPolicy.SuccessOnSelected([patrolling], synchronise=False),
+            children=[metacontroller, patrolling],
         ),
         wrap_up,
     ])

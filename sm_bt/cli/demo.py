@@ -26,10 +26,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"world time the laser is repaired; 'never' to leave it broken (default {REPAIR_AT:g}; "
                              f"with --ros, once the pilot has been in degraded mode for {DEGRADED_FOR:g} s, as "
                              "on simulated nodes: handling the failure takes real seconds there)")
-    parser.add_argument("--cycles", type=positive_int, default=2, help="patrol cycles (default 2)")
-    parser.add_argument("--speed", type=non_negative, default=25.0,
+    parser.add_argument("--cycles", type=positive_int, default=2,
+                        help="patrol rounds of the seven waypoints (default 2)")
+    parser.add_argument("--speed", type=non_negative, default=35.0,
                         help="world (virtual) seconds per wall second; 0 runs as fast as possible, "
-                             "simulated only (default 25)")
+                             "simulated only (default 35)")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
     parser.add_argument("--view", type=port, nargs="?", const=8765, default=None, metavar="PORT",
                         help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "

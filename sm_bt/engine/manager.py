@@ -215,17 +215,20 @@ class ModeManager:
 
     # -- commands ---------------------------------------------------------------------------------
 
-    def change_mode(self, part: str, mode: str, *, timeout: float | None = None) -> Request:
+    def change_mode(self, part: str, mode: str, *, timeout: float | None = None, requester: str = "user") -> Request:
         """Ask for ``part`` (system or node) to be active in ``mode`` (``__DEFAULT__`` names its
-        default mode). Returns at once. ``ValueError`` for an empty mode name."""
+        default mode). Returns at once. ``ValueError`` for an empty mode name. ``requester`` says
+        who asks, for logs and narratives (:attr:`Request.requester`: sm_bt's behaviours say
+        ``"tree"``)."""
         if not mode:
             raise ValueError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
                              "for the default mode)")
         with self._entry():
-            return self._request(part, StateMode(State.ACTIVE, mode), f"change_mode {part} {mode}", timeout)
+            return self._request(part, StateMode(State.ACTIVE, mode), f"change_mode {part} {mode}", timeout,
+                                 requester)
 
     def change_state(self, part: str, transition: Transition | str | int, *,
-                     timeout: float | None = None) -> Request:
+                     timeout: float | None = None, requester: str = "user") -> Request:
         """Ask for a lifecycle transition of ``part`` (system or node): ``"configure"``,
         ``"activate"``, ``Transition.DEACTIVATE``, ... Returns at once. A settled part must be in
         a state the transition is valid from (as a lifecycle node requires), or already in its
@@ -236,7 +239,7 @@ class ModeManager:
             name = transition.label if isinstance(transition, Transition) else str(transition)
             description = f"change_state {part} {name}"
             if part not in self.model.parts:
-                return self._refuse(part, description, self._unknown_part(part))
+                return self._refuse(part, description, self._unknown_part(part), requester)
             current = self._inference.actual(part).state
             try:
                 resolved = self._resolve_transition(transition, current)
@@ -246,11 +249,13 @@ class ModeManager:
                 if current.is_primary and goal is not current and not self._moving(part):
                     step_for(current, resolved)  # raises with the valid ones when invalid here
             except (PlanError, ValueError) as error:
-                return self._refuse(part, description, f"{part}: {error}")
+                return self._refuse(part, description, f"{part}: {error}", requester)
             mode = self._mode_for_activation(part) if goal is State.ACTIVE else None
-            return self._start(part, StateMode(goal, mode), description, Origin.USER, timeout, resolved)
+            return self._start(part, StateMode(goal, mode), description, Origin.USER, timeout, resolved,
+                               requester=requester)
 
-    def change_to(self, part: str, target: StateMode | str, *, timeout: float | None = None) -> Request:
+    def change_to(self, part: str, target: StateMode | str, *, timeout: float | None = None,
+                  requester: str = "user") -> Request:
         """Ask for ``part`` to reach ``target`` (``"active.FAST"``, ``"inactive"``, a
         :class:`StateMode`), whatever it is in now: the plan takes every lifecycle step needed.
         Used to put a part back where it was (for instance after holding a mode). Returns at once."""
@@ -258,12 +263,12 @@ class ModeManager:
             try:
                 wanted = target if isinstance(target, StateMode) else StateMode.parse(target)
             except ValueError as error:
-                return self._refuse(part, f"change_to {part} {target}", str(error))
+                return self._refuse(part, f"change_to {part} {target}", str(error), requester)
             description = f"change_to {part} {wanted}"
             if wanted.state not in (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE):
                 return self._refuse(part, description, f"{wanted.state.label} is not a state to ask for "
-                                    "(unconfigured, inactive or active)")
-            return self._request(part, wanted, description, timeout)
+                                    "(unconfigured, inactive or active)", requester)
+            return self._request(part, wanted, description, timeout, requester)
 
     def subscribe(self, callback: Observer, part: str | Iterable[str] | None = None,
                   kinds: Iterable[EventKind] | None = None) -> Subscription:
@@ -341,31 +346,34 @@ class ModeManager:
 
     # -- executions -------------------------------------------------------------------------------
 
-    def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None) -> Request:
+    def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None,
+                 requester: str) -> Request:
         """Start a user request for ``wanted`` (an active mode resolved: ``__DEFAULT__`` is the
         default mode), or refuse it with the part's real names."""
         if part not in self.model.parts:
-            return self._refuse(part, description, self._unknown_part(part))
+            return self._refuse(part, description, self._unknown_part(part), requester)
         if wanted.state is State.ACTIVE:
             resolved = self._resolve_mode(part, wanted.mode or DEFAULT_MODE)
             if resolved is None:
                 modes = ", ".join(self.available_modes(part))
-                return self._refuse(part, description, f"unknown mode {wanted.mode!r} of {part} (modes: {modes})")
+                return self._refuse(part, description, f"unknown mode {wanted.mode!r} of {part} (modes: {modes})",
+                                    requester)
             wanted = StateMode(State.ACTIVE, resolved)
-        return self._start(part, wanted, description, Origin.USER, timeout)
+        return self._start(part, wanted, description, Origin.USER, timeout, requester=requester)
 
     def _start(self, part: str, target: StateMode, description: str, origin: Origin,
-               timeout: float | None, transition: Transition | None = None) -> Request:
+               timeout: float | None, transition: Transition | None = None, *, requester: str | None = None) -> Request:
         implied = implied_targets(self.model, part, target)
         scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
         if origin is Origin.USER:
             why = "; ".join(filter(None, (self._out_of_reach(n, t) for n, t in implied if n in scope)))
             if why:  # refused as a whole: nothing is changed
-                return self._refuse(part, description, why)
-        request = Request(part, target, description, origin, self.clock.now(), withdraw=self._withdraw)
+                return self._refuse(part, description, why, requester)
+        request = Request(part, target, description, origin, self.clock.now(), withdraw=self._withdraw,
+                          requester=requester)
         # A rule's or recovery's request follows its own log line: the start is detail then.
         (log.info if origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id, description,
-                                                           origin.value)
+                                                           request.requester)
         preempted = [e for e in self._executions.values() if e.scope & scope or e.request.part == part]
         for execution in preempted:
             self.finish(execution, False, f"preempted by request #{request.id} ({description})")
@@ -392,9 +400,10 @@ class ModeManager:
         """Carry on with ``nodes`` of a preempted request: their targets are still what it asked."""
         old = preempted.request
         description = f"continue #{old.id} ({old.description}) for {', '.join(sorted(nodes))}"
-        request = Request(old.part, old.target, description, old.origin, self.clock.now(), withdraw=self._withdraw)
+        request = Request(old.part, old.target, description, old.origin, self.clock.now(), withdraw=self._withdraw,
+                          requester=old.requester)
         (log.info if old.origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id,
-                                                               description, old.origin.value)
+                                                               description, request.requester)
         self._run(Execution(self, request, nodes, {}, continuation=True), None)
 
     def _run(self, execution: Execution, timeout: float | None) -> None:
@@ -407,9 +416,9 @@ class ModeManager:
         self._emit(EventKind.REQUEST, request.part, f"#{request.id} {request.description} started", request=request)
         execution.start()
 
-    def _refuse(self, part: str, description: str, reason: str) -> Request:
+    def _refuse(self, part: str, description: str, reason: str, requester: str | None = None) -> Request:
         now = self.clock.now()
-        request = Request(part, StateMode(State.UNKNOWN), description, Origin.USER, now)
+        request = Request(part, StateMode(State.UNKNOWN), description, Origin.USER, now, requester=requester)
         log.warning("request %s refused: %s", description, reason)
         request._finish(False, reason, now)
         return request

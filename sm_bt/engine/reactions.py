@@ -161,8 +161,10 @@ class Reactions:
         if back is not None and divergence.since - back >= self.window - EPSILON:
             self.reset([part])  # it stayed on target for the window: a new run of failures
         elif back is not None:
-            self._last[part] = (f"{part} left {divergence.target} again {divergence.since - back:.3g} s "
-                                f"after attempt {self._used.get(part, 0)} brought it back")
+            after = divergence.since - back
+            when = f"{after:.2f} s after" if after >= 0.005 else "as soon as"  # no 3.55e-15 s
+            self._last[part] = (f"{part} left {divergence.target} again {when} attempt "
+                                f"{self._used.get(part, 0)} brought it back")
         self._back.pop(part, None)
         used = self._used.get(part, 0)
         if used >= self.attempts:

@@ -30,12 +30,15 @@ class Request:
     done-callback; ``cancel()`` withdraws it."""
 
     def __init__(self, part: str, target: StateMode, description: str, origin: Origin, created: float,
-                 withdraw: Callable[[Request], None] | None = None) -> None:
+                 withdraw: Callable[[Request], None] | None = None, requester: str | None = None) -> None:
         self.id = next(_ids)
         self.part = part
         self.target = target
         self.description = description
         self.origin = origin
+        #: Who asked, in a word: the caller's ``requester`` for a user request (``"user"`` unless
+        #: said, ``"tree"`` from a behaviour), else ``"rule"`` or ``"recovery"``.
+        self.requester = requester or origin.value
         self.created = created
         self.finished: float | None = None
         self.done = False

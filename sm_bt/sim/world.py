@@ -50,6 +50,9 @@ class World:
     laser_ok: bool = True
     odometer: float = 0.0
     time_scale: float = 1.0
+    #: Waypoints reached since the patrol round began (:meth:`new_round`).
+    visited: set[str] = field(default_factory=set)
+    rounds: int = 0
 
     def __post_init__(self) -> None:
         if not (self.time_scale > 0.0 and math.isfinite(self.time_scale)):
@@ -76,7 +79,15 @@ class World:
                              self.position[1] + (y - self.position[1]) * fraction)
         self.odometer += step
         self.battery = max(0.0, self.battery - step * self.drain_per_metre)
-        return remaining - step <= 1e-9
+        if remaining - step <= 1e-9:
+            self.visited.add(waypoint)
+            return True
+        return False
+
+    def new_round(self) -> None:
+        """A patrol round is complete: count it, and start the next with no waypoint visited."""
+        self.rounds += 1
+        self.visited.clear()
 
     def recharge(self) -> None:
         self.battery = 1.0

@@ -88,9 +88,12 @@ class FrameMaker:
         self._subscription = manager.subscribe(self._on_event, kinds=_EVENT_KINDS)
 
     def _on_event(self, event: Event) -> None:
+        text = str(event.text) if event.text else _describe(event)
+        if event.kind is EventKind.REQUEST and event.request is not None and not event.request.done:
+            text += f" [{event.request.requester}]"  # who asked: tree, user, rule, recovery
         with self._events_lock:
             self._events.append({"time": round(event.time - self._epoch, 3), "kind": event.kind.value,
-                                 "part": event.part, "text": str(event.text) if event.text else _describe(event)})
+                                 "part": event.part, "text": text})
 
     def __call__(self, tree: py_trees.trees.BehaviourTree) -> None:
         self._ticks += 1
