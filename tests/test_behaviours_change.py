@@ -286,3 +286,17 @@ def test_each_new_step_of_a_mode_change_flags_a_snapshot_as_changed() -> None:
     for (mine, plain_changed, message), (_, _, before) in zip(flagged[1:], flagged, strict=False):
         assert mine == (plain_changed or message != before)
     assert any(mine and not plain_changed for mine, plain_changed, _ in flagged[1:])
+
+
+def test_requests_say_who_asked_the_tree_or_the_caller() -> None:
+    rig = pilot_rig()
+    change = ChangeState("Configure", "pilot", "configure")
+    tree = build(change, rig)
+    tree.tick()
+    (by_tree,) = rig.manager.requests()
+    assert by_tree.requester == "tree"
+    tick_until_done(tree, rig)
+    assert rig.manager.change_mode("pilot", "f_normal_mode").requester == "user"
+    assert rig.manager.change_mode("pilot", "f_slow_mode", requester="operator").requester == "operator"
+    refused = rig.manager.change_mode("pilot", "f_nope", requester="operator")
+    assert refused.done and not refused.succeeded and refused.requester == "operator"
