@@ -11,7 +11,7 @@ before it (``<!-- readme-test: ... -->``, invisible on the rendered page):
 - ``xml``: ``file PATH, checked against MODEL``: the file holds the block and checks clean;
 - ``sh``: each line is ``make TARGET`` (a target of the Makefile) or an ``sm-bt`` command line
   that the CLI's parser accepts; ``skip (why)``: not run, with the reason;
-- ``text``: ``run`` (or ``run ros``, with the pilot's nodes and ``sm-bt manager pilot`` up): a
+- ``text``: ``run`` (or ``run ros MODEL``, with the model's nodes and ``sm-bt manager MODEL`` up): a
   shell transcript; each ``$ command`` is run from the repository's root with the environment's
   ``bin`` on ``PATH``, and its output (stdout and stderr as a terminal shows them) must match
   the lines below it, where ``…`` stands for any text within a line and a line of only ``…``
@@ -53,7 +53,7 @@ KINDS: dict[str, list[tuple[str, re.Pattern[str]]]] = {
              ("part", re.compile(r"part of (\S+)"))],
     "xml": [("tree", re.compile(r"file (\S+), checked against (\S+)"))],
     "sh": [("commands", re.compile(r"")), ("skip", re.compile(r"skip \(.+\)"))],
-    "text": [("transcript", re.compile(r"run")), ("ros transcript", re.compile(r"run ros \(.+\)")),
+    "text": [("transcript", re.compile(r"run")), ("ros transcript", re.compile(r"run ros (\S+) \(.+\)")),
              ("layout", re.compile(r"layout"))],
 }
 TRANSCRIPT_TIMEOUT = 120.0
@@ -255,8 +255,9 @@ def test_transcripts_print_what_the_readme_shows(block: Block) -> None:
 @by_line(of_kind("ros transcript"))
 def test_ros_transcripts_print_what_the_readme_shows(
         block: Block, start_manager: Callable[..., ManagerProcess], node_processes: Starter) -> None:
-    manager = start_manager()
-    node_processes("pilot")
+    (model,) = block.kind[1]
+    manager = start_manager(model=model)
+    node_processes(model)
     manager.ready()
     run_transcript(block)
 

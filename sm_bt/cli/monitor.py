@@ -35,6 +35,9 @@ STEP = 0.1  # virtual seconds per clock advance: appended output changes at most
 LIVE_STEP = 0.02  # finer in place, where intermediate states (configuring, ...) cost no lines
 SETTLE = 1.0  # virtual seconds watched after the last request, without --duration
 DISCOVERY = 5.0  # --ros: wall seconds to wait for the model's nodes before the requests
+# --ros --change: wall seconds to look for another manager's services after the nodes were found
+# (a manager's endpoints are discovered independently of, and can arrive after, the nodes')
+MANAGER_LOOKOUT = 1.5
 ROS_NODE_NAME = "sm_bt_monitor"  # not the reference manager's name: a manager may run alongside
 _EPSILON = 1e-9
 
@@ -184,11 +187,17 @@ def _watch(args: argparse.Namespace, model: Model, watch: _Watch, monitor: Monit
     return 1 if failed else 0
 
 
-def _served_by_a_manager(node: Any, model: Model) -> list[str]:
-    """The model's parts whose ``change_mode`` another process serves (seen on the ROS graph)."""
-    served = {name[1:-len("/change_mode")] for name, types in node.get_service_names_and_types()
-              if name.endswith("/change_mode") and "system_modes_msgs/srv/ChangeMode" in types}
-    return [part for part in model.parts if part in served]
+def _served_by_a_manager(node: Any, model: Model, lookout: float = MANAGER_LOOKOUT) -> list[str]:
+    """The model's parts whose ``change_mode`` another process serves, looked for on the ROS graph
+    for up to ``lookout`` wall seconds (empty when none appears)."""
+    give_up = time.monotonic() + lookout
+    while True:
+        served = {name[1:-len("/change_mode")] for name, types in node.get_service_names_and_types()
+                  if name.endswith("/change_mode") and "system_modes_msgs/srv/ChangeMode" in types}
+        parts = [part for part in model.parts if part in served]
+        if parts or time.monotonic() >= give_up:
+            return parts
+        time.sleep(0.05)
 
 
 class _Watch:
