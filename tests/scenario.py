@@ -314,6 +314,10 @@ class I8RulesCascade(InvariantViolation):
     code = "I8"
 
 
+class I9RefusalChangesNothing(InvariantViolation):
+    code = "I9"
+
+
 @dataclass
 class Stats:
     """What ``make stress`` sums up over every scenario run."""
@@ -609,6 +613,8 @@ class _Runner:
     def request(self, action: RequestAction, timeout: float | None = None) -> Request:
         manager = self.manager
         timeout = action.timeout if timeout is None else timeout
+        targets = {part: manager.target(part) for part in self.model.parts}
+        running = {r.id for r in manager.requests()}
         if isinstance(action, ChangeMode):
             request = manager.change_mode(action.part, action.mode, timeout=timeout)
         elif isinstance(action, ChangeState):
@@ -621,6 +627,13 @@ class _Runner:
             request.add_done_callback(self._finished)
         seen.timeout = self.options.request_timeout if timeout is None else timeout
         seen.refused_at_once = request.done and not request.succeeded
+        if request.refused:  # I9: no target, no request in flight survives a refusal
+            changed = sorted(part for part, target in targets.items() if manager.target(part) != target)
+            started = {r.id for r in manager.requests()} - running
+            if changed or started or not (request.done and not request.succeeded):
+                self._violate(I9RefusalChangesNothing, f"request #{request.id} {request.description} was refused "
+                                                       f"({request.reason}) but changed the targets of {changed} "
+                                                       f"and started {sorted(started)}")
         seen.expect_refusal = invalid_by_name(self.model, action)
         self.user.append(request)
         return request

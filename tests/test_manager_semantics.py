@@ -215,13 +215,29 @@ def test_a_request_that_needs_a_vanished_node_is_refused_and_changes_nothing() -
     rig.run(1.0)
     sent = len(rig.backend.events)
     request = rig.manager.change_mode("pilot", "f_performance_mode")
-    assert request.done and not request.succeeded
+    assert request.done and not request.succeeded and request.refused
     assert request.reason.startswith("laser_resender is not reachable (no answer for")
+    assert request not in rig.manager.requests()
     assert rig.manager.target("pilot") == StateMode(State.ACTIVE, "f_normal_mode")
     assert rig.manager.target("controller_server") == StateMode(State.ACTIVE, "__DEFAULT__")
     assert len(rig.backend.events) == sent, "no node was touched"
     # A mode that leaves the vanished node alone is still fine.
     assert rig.finish(rig.manager.change_mode("controller_server", "FAST")).succeeded
+    # After it comes back, nothing of the refused request is carried out.
+    rig.backend.restart("laser_resender", State.INACTIVE)
+    rig.run(5.0)
+    assert rig.manager.target("pilot") == StateMode(State.ACTIVE, "f_normal_mode")
+    assert not [e for e in rig.backend.events if "f_performance_mode" in str(e)]
+
+
+def test_an_accepted_request_that_fails_is_not_a_refusal() -> None:
+    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig.finish(rig.manager.change_state("pilot", "configure"))
+    rig.backend.fail_next("amcl", Transition.ACTIVATE)
+    request = rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    assert not request.succeeded and not request.refused
+    assert "amcl" in request.reason
+    assert rig.manager.target("pilot") == StateMode(State.ACTIVE, "f_normal_mode"), "an accepted target stands"
 
 
 # -- answers before reports (as ROS 2 may deliver them) ---------------------------------------------

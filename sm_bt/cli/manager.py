@@ -83,6 +83,9 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
     gc.freeze()
     try:
         _align_node_logger(runtime.node, args.log_level)
+        from sm_bt.ros.environment import describe_discovery
+
+        log.info("discovery: %s", describe_discovery())  # the first thing to check when nodes are not found
         for line in startup_lines(model):
             log.info(line)
         systems = sum(isinstance(p, SystemPart) for p in model.parts.values())

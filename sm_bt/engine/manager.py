@@ -420,6 +420,7 @@ class ModeManager:
         now = self.clock.now()
         request = Request(part, StateMode(State.UNKNOWN), description, Origin.USER, now, requester=requester)
         log.warning("request %s refused: %s", description, reason)
+        request.refused = True
         request._finish(False, reason, now)
         return request
 

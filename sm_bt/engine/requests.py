@@ -44,6 +44,9 @@ class Request:
         self.done = False
         self.succeeded = False
         self.reason = ""
+        #: Refused as a whole (unknown part or mode, a node out of reach, ...): nothing was changed,
+        #: no target, no request in flight. A refused request is done and failed.
+        self.refused = False
         self._withdraw = withdraw
         self._progress: Callable[[], str] | None = None  # the step in progress, while running
         self._callbacks: list[Callable[[Request], None]] = []

@@ -10,17 +10,24 @@ What the reference manager does not do, and this backend does:
 * **Live state on (re)appearance.** A node whose services show up is asked for its state and
   parameters before anything is reported; transition and parameter events that arrive meanwhile
   are applied after that report, in order.
-* **Liveness.** After a crash, DDS keeps showing a node for its lease (20 s with Fast DDS), so
-  discovery alone cannot tell. The nodes of one process share a DDS participant and die together:
-  one node per participant is probed (``get_state``, or ``get_parameters`` for plain nodes)
-  ``probe_interval`` s after its last answer, and its answer vouches for the others; a probe
-  unanswered for ``liveness_timeout`` s means they vanished (so a crash is seen within
-  ``probe_interval + liveness_timeout``). The graph is looked at every ``poll_interval`` s while a
-  node is missing, every ``idle_poll_interval`` s once all are present (``graph_interval`` for the
-  services of present nodes: the costly part).
-  While a call of ours is in flight the node may be busy in a long transition callback, which
-  also blocks its other services: then only that call's own timeout applies. A node that leaves
-  the graph cleanly is reported at once.
+* **Liveness.** After a crash or behind a cut network, DDS keeps showing a node for its lease
+  (20 s with Fast DDS), so discovery alone cannot tell. The nodes of one process share a DDS
+  participant and die together: one node per participant is probed (``get_state``, or
+  ``get_parameters`` for plain nodes) ``probe_interval`` s after its last answer, and anything
+  heard from any of them (an answer, a transition or parameter event) vouches for all. Silence
+  for the *liveness window* means they are unreachable: ``liveness_timeout`` s on a good link
+  (so a crash or a cut is reported within that long of the last word), wider where the answers
+  are slow. The window adapts to the round trips actually observed (``2 x (srtt + 4 rttvar)``,
+  TCP's estimator): a node behind a slow or lossy link, where reliable DDS delivery retransmits,
+  is slow, not gone (:meth:`RosBackend.link` says how slow). The graph is looked at every
+  ``poll_interval`` s while a node is missing, every ``idle_poll_interval`` s once all are present
+  (``graph_interval`` for the services of present nodes: the costly part).
+  A node working on a long transition of ours blocks its other services: while every node of its
+  process is in a transition state that began after our call was sent (their last events say
+  so), only the calls' own timeout applies, as nothing tells a busy process from an unreachable
+  one. A call that the node never acknowledged with an event does not hold the verdict back, so
+  a change in flight when the network is cut fails within the window. A node
+  that leaves the graph cleanly is reported at once.
 * **Timeouts everywhere.** Every call has one; a call that times out fails and is removed from
   the client, and every call in flight on a vanished node fails with the reason.
 * **Safe transitions.** Requests carry the transition's id *and* label: rclpy looks the label up
@@ -78,8 +85,10 @@ class _Call:
     timer: TimerHandle | None = None
     on_result: Callable[[Any], None] | None = None  # gets the response
     on_failure: Callable[[str], None] | None = None  # gets the reason
-    busy: bool = True  # the node may be blocked while serving it (suspends the liveness watchdog)
+    busy: bool = True  # the node may be blocked while serving it (see _Peer.working)
     finished: bool = False
+    sent: float = 0.0
+    probe: bool = False  # a liveness probe: its round trip is sampled
 
 
 @dataclass(eq=False)
@@ -116,6 +125,7 @@ class _Peer:
     buffered_state: State | None = None
     buffered_parameters: dict[str, ParamValue] = field(default_factory=dict)
     events: int = 0  # transition events received; tells a probe answer from a stale one
+    state_heard: float = 0.0  # when the last transition event came
     gone: str = ""  # why it vanished (while absent after having been present)
     participant: bytes | None = None  # the DDS participant (process) hosting it, once known
     last_asked: float = 0.0  # the last probe of any node of its participant
@@ -126,10 +136,40 @@ class _Peer:
     sets_in_flight: list[_SetInFlight] = field(default_factory=list)
     transitions_in_flight: list[list[State]] = field(default_factory=list)  # states seen meanwhile
     outside: dict[str, int] = field(default_factory=dict)  # changes by others reported, per parameter
+    # Round trips of its probes (the first calls after discovery are slow, and say nothing of the
+    # link): the estimate behind the liveness window.
+    srtt: float | None = None
+    rttvar: float = 0.0
+    window: float = 0.0  # the liveness window now (shared by the nodes of its process)
+    retired: list[Any] = field(default_factory=list)  # clients replaced while a call was still on them
 
     @property
     def busy(self) -> bool:
         return any(call.busy and not call.finished for call in self.calls)
+
+    @property
+    def working(self) -> bool:
+        """Blocked in a transition of ours, as far as we know: a call of ours in flight and an
+        event since it was sent says the node is in a transition state (its services wait)."""
+        return (not self.state.is_primary and self.state is not State.UNKNOWN
+                and any(call.busy and not call.finished and self.state_heard >= call.sent for call in self.calls))
+
+    def sample(self, rtt: float) -> None:
+        """A round trip of a quick call (RFC 6298's smoothing)."""
+        if self.srtt is None:
+            self.srtt, self.rttvar = rtt, rtt / 2
+        else:
+            self.rttvar = 0.75 * self.rttvar + 0.25 * abs(self.srtt - rtt)
+            self.srtt = 0.875 * self.srtt + 0.125 * rtt
+
+
+@dataclass(frozen=True)
+class Link:
+    """How a node answers, as :meth:`RosBackend.link` reports it."""
+
+    rtt: float | None  # smoothed round trip of its quick calls (None: none yet)
+    window: float  # silence for this long means unreachable
+    slow: bool  # the window is wider than on a good link
 
 
 class RosBackend:
@@ -137,13 +177,13 @@ class RosBackend:
 
     ``call_timeout`` bounds every state change and parameter set, ``acquire_timeout`` the
     queries made when a node (re)appears (the first call after discovery is slow), and a node
-    silent for ``liveness_timeout`` s while probed every ``probe_interval`` s is reported
-    vanished. A node with parameter services but no lifecycle services for ``plain_after`` s is
+    silent for ``liveness_timeout`` s (more on a slow link) while probed every ``probe_interval`` s
+    is reported vanished. A node with parameter services but no lifecycle services for ``plain_after`` s is
     a plain node. ``poll_interval`` is how often the graph is looked at.
     """
 
     def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
-                 acquire_timeout: float = 2.0, probe_interval: float = 0.5, liveness_timeout: float = 1.5,
+                 acquire_timeout: float = 2.0, probe_interval: float = 0.2, liveness_timeout: float = 0.8,
                  plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 1.0,
                  graph_interval: float = 1.0, watch_node: Node | None = None) -> None:
         self._node = node
@@ -174,6 +214,19 @@ class RosBackend:
     def clock(self) -> WallClock:
         return self._clock
 
+    def link(self, node: str) -> Link:
+        """How ``node`` answers now: its round trip and liveness window."""
+        peer = self._peer(node)
+        with self._lock:
+            window = max(peer.window, self._window_of(peer))
+            return Link(peer.srtt, window, window > self.liveness_timeout + _SLACK)
+
+    def _window_of(self, peer: _Peer) -> float:
+        """The liveness window its own round trips call for (lock held)."""
+        if peer.srtt is None:
+            return self.liveness_timeout
+        return min(max(self.liveness_timeout, ADAPT * (peer.srtt + 4 * peer.rttvar)), MAX_WINDOW)
+
     # -- Backend protocol ---------------------------------------------------------------------------
 
     def attach(self, nodes: Sequence[str], listener: BackendListener) -> None:
@@ -200,7 +253,7 @@ class RosBackend:
             for subscription in self._subscriptions:
                 self._node.destroy_subscription(subscription)
             for peer in self._peers.values():
-                for client in (peer.change_state, peer.set_parameters):
+                for client in (peer.change_state, peer.set_parameters, *peer.retired):
                     self._node.destroy_client(client)
                 for client in (peer.get_state, peer.get_parameters, peer.list_parameters, peer.get_transitions):
                     self._watch.destroy_client(client)
@@ -360,8 +413,7 @@ class RosBackend:
                 self._poll_timer = self._clock.call_later(
                     self.idle_poll_interval if settled else self.poll_interval, self._poll)
 
-    @staticmethod
-    def _share_liveness(peers: list[_Peer]) -> set[_Peer]:
+    def _share_liveness(self, peers: list[_Peer]) -> set[_Peer]:
         """Nodes of one participant live and die together (lock held): each hears what any of them
         heard, and one of them that is not busy is probed for all. Returns the ones to probe."""
         groups: dict[bytes | str, list[_Peer]] = {}
@@ -372,8 +424,9 @@ class RosBackend:
         for members in groups.values():
             heard = max(member.last_heard for member in members)
             asked = max(member.last_probe for member in members)
+            window = max(self._window_of(member) for member in members)
             for member in members:
-                member.last_heard, member.last_asked = heard, asked
+                member.last_heard, member.last_asked, member.window = heard, asked, window
             probing = next((member for member in members if member.probe is not None), None)
             probed.add(probing or next((m for m in members if not m.busy), members[0]))
         return probed
@@ -383,13 +436,17 @@ class RosBackend:
         present = peer.presence is _Presence.PRESENT
         lifecycle_ready = peer.get_state.service_is_ready() if graph or not present else True
         parameters_ready = peer.get_parameters.service_is_ready() if graph or not present else True
+        if graph and present and peer.participant is None:  # its publishers may show up after it answered
+            participant = self._participant_of(peer)
+            with self._lock:
+                peer.participant = participant
         with self._lock:
             presence = peer.presence
             if presence is _Presence.PRESENT:
                 gone = not (lifecycle_ready if peer.lifecycle else parameters_ready)
                 # Silent: asked since it (or a node of its process) was last heard, and no word
-                # for liveness_timeout.
-                silent = (not peer.busy and now - peer.last_heard > self.liveness_timeout
+                # for the window (the probe chain usually tells first: this is the safety net).
+                silent = (not self._working(peer) and now - peer.last_heard > max(peer.window, self._window_of(peer))
                           and peer.last_asked > peer.last_heard)
                 probe_due = probed and peer.probe is None and now - peer.last_probe >= self.probe_interval
             if presence is _Presence.ABSENT:
@@ -403,8 +460,7 @@ class RosBackend:
             if gone:
                 self._vanish(peer, f"node {peer.fqn} left the ROS graph")
             elif silent:
-                self._vanish(peer, f"no answer from {peer.fqn} for {self.liveness_timeout:g} s (node exited, or "
-                                   "network unreachable)")
+                self._silence_verdict(peer)
             elif probe_due:
                 self._probe(peer, now)
         elif presence is _Presence.ABSENT:
@@ -444,6 +500,7 @@ class RosBackend:
             log.debug("node %s appeared: %s%s", peer.fqn, state.label, "" if lifecycle else " (parameters only)")
             report = NodeReport(state, values, lifecycle)
             self._dispatch(lambda: listener.node_appeared(peer.part, report))
+            self._clock.call_later(self.probe_interval, lambda: self._probe_if_due(peer))  # the liveness chain
             if later:
                 self._dispatch(lambda: listener.node_parameters(peer.part, later))
 
@@ -471,6 +528,11 @@ class RosBackend:
         with self._lock:
             peer.last_probe = now
             events_before = peer.events
+            # Unanswered by the end of the window (from the last word of its process): the verdict.
+            members = self._members(peer)
+            heard = max(m.last_heard for m in members)
+            window = max(self._window_of(m) for m in members)
+            timeout = max(heard + window - now, self.probe_interval)
 
         def answered(response: Any) -> None:
             self._clock.call_later(self.probe_interval, lambda: self._probe_if_due(peer))
@@ -496,10 +558,10 @@ class RosBackend:
 
         if peer.lifecycle:
             call = self._call(peer, peer.get_state, GetState.Request(), "get_state (liveness)",
-                              self.liveness_timeout, answered, unanswered, busy=False)
+                              timeout, answered, unanswered, busy=False, probe=True)
         else:
             call = self._call(peer, peer.get_parameters, GetParameters.Request(names=[]), "get_parameters (liveness)",
-                              self.liveness_timeout, answered, unanswered, busy=False)
+                              timeout, answered, unanswered, busy=False, probe=True)
         with self._lock:
             if not call.finished:
                 peer.probe = call
@@ -508,23 +570,43 @@ class RosBackend:
         """The next probe of a chain: one ``probe_interval`` after the last answer."""
         now = self._clock.now()
         with self._lock:
-            due = (self._listener is not None and peer.presence is _Presence.PRESENT and peer.probe is None
-                   and now - peer.last_probe >= self.probe_interval - _SLACK)
+            members = self._members(peer)  # one chain per process: its answer vouches for all
+            due = (self._listener is not None and peer.presence is _Presence.PRESENT
+                   and all(m.probe is None for m in members)
+                   and now - max(m.last_probe for m in members) >= self.probe_interval - _SLACK)
         if due:
             self._probe(peer, now)
 
+    def _members(self, peer: _Peer) -> list[_Peer]:
+        """The present nodes of ``peer``'s process, ``peer`` included (lock held)."""
+        key = peer.participant or peer.fqn
+        members = [p for p in self._peers.values()
+                   if p.presence is _Presence.PRESENT and (p.participant or p.fqn) == key]
+        return members or [peer]
+
+    def _working(self, peer: _Peer) -> bool:
+        """Every node of ``peer``'s process is busy with a transition of ours (lock held), so none
+        can answer meanwhile. One that is not busy answers for the process (executors with a
+        thread per node), and its silence is the process's."""
+        return all(member.working for member in self._members(peer))
+
     def _silence_verdict(self, peer: _Peer) -> None:
-        """A probe went unanswered: the nodes of its process not heard of since are gone."""
+        """A probe went unanswered: its process is unreachable if nothing was heard from it for the
+        window; otherwise (heard meanwhile, or busy with our transition) probe on."""
         now = self._clock.now()
         with self._lock:
-            key = peer.participant or peer.fqn
-            members = [p for p in self._peers.values()
-                       if p.presence is _Presence.PRESENT and (p.participant or p.fqn) == key]
-            heard = max((m.last_heard for m in members), default=now)
-            silent = [m for m in members if not m.busy and now - heard >= self.liveness_timeout - _SLACK]
+            members = self._members(peer)
+            heard = max(m.last_heard for m in members)
+            window = max(max(m.window, self._window_of(m)) for m in members)
+            working = self._working(peer)
+            silent = [] if working or now - heard < window - _SLACK else \
+                [m for m in members if m.presence is _Presence.PRESENT]
+            again = not silent and self._listener is not None and peer.presence is _Presence.PRESENT
         for member in silent:
-            self._vanish(member, f"no answer from {member.fqn} for {self.liveness_timeout:g} s (node exited, or "
-                                 "network unreachable)")
+            self._vanish(member, f"no answer from {member.fqn} for {now - heard:.1f} s (node exited, or network "
+                                 "unreachable)")
+        if again:
+            self._clock.call_later(0.0 if not working else self.probe_interval, lambda: self._probe_if_due(peer))
 
     def _vanish(self, peer: _Peer, reason: str) -> None:
         with self._lock:
@@ -545,7 +627,7 @@ class RosBackend:
         state = _state_of(message.goal_state.id)
         with self._lock:
             peer.events += 1
-            now = peer.last_heard = self._clock.now()
+            now = peer.last_heard = peer.state_heard = self._clock.now()
             if _echo(peer.state_echoes, state, now):
                 return  # a transition of ours, already reported from its answer
             for seen in peer.transitions_in_flight:
@@ -600,8 +682,10 @@ class RosBackend:
     # -- calls ---------------------------------------------------------------------------------------
 
     def _call(self, peer: _Peer, client: Any, request: Any, label: str, timeout: float,
-              on_result: Callable[[Any], None], on_failure: Callable[[str], None], *, busy: bool = True) -> _Call:
-        call = _Call(peer, label, client, on_result=on_result, on_failure=on_failure, busy=busy)
+              on_result: Callable[[Any], None], on_failure: Callable[[str], None], *, busy: bool = True,
+              probe: bool = False) -> _Call:
+        call = _Call(peer, label, client, on_result=on_result, on_failure=on_failure, busy=busy,
+                     sent=self._clock.now(), probe=probe)
         with self._lock:
             peer.calls.add(call)
         call.timer = self._clock.call_later(
@@ -619,7 +703,9 @@ class RosBackend:
             self._finish(call, failure=f"{call.label} on {call.peer.part} failed: {error}")
             return
         with self._lock:
-            call.peer.last_heard = self._clock.now()
+            now = call.peer.last_heard = self._clock.now()
+            if call.probe:  # a quick query on a warm path: the link's (and the executor's) round trip
+                call.peer.sample(now - call.sent)
         self._finish(call, response=future.result())
 
     def _finish(self, call: _Call, *, response: Any = None, failure: str | None = None) -> None:
@@ -634,10 +720,32 @@ class RosBackend:
             if call.future is not None and not call.future.done():
                 call.client.remove_pending_request(call.future)
                 call.future.cancel()
+                if call.busy and self._listener is not None:
+                    self._renew_client(call)
             if call.on_failure is not None:
                 call.on_failure(failure)
         elif call.on_result is not None:
             call.on_result(response)
+
+    def _renew_client(self, call: _Call) -> None:
+        """A change abandoned unanswered must never be carried out late: its request may still sit
+        in the client's DDS writer, which re-sends it once the network heals. A fresh client takes
+        its place; the old one (with its writer) goes once no call of ours is left on it."""
+        peer, old = call.peer, call.client
+        kind, attribute = ((ChangeState, "change_state") if old is peer.change_state
+                           else (SetParametersAtomically, "set_parameters") if old is peer.set_parameters
+                           else (None, ""))
+        if kind is None:
+            return  # renewed already
+        with self._lock:
+            fresh = self._node.create_client(kind, old.srv_name)
+            setattr(peer, attribute, fresh)
+            in_use = any(other.client is old and not other.finished for other in peer.calls)
+            if in_use:
+                peer.retired.append(old)
+        if not in_use:
+            self._node.destroy_client(old)
+        log.debug("%s: a fresh client, the abandoned request is dropped with the old one", old.srv_name)
 
     # -- helpers -------------------------------------------------------------------------------------
 
@@ -724,6 +832,10 @@ class _Outbox:
 
 
 _SLACK = 1e-3  # timers fire a little early or late
+#: The liveness window is this many estimated round trips (``srtt + 4 rttvar``) where that is
+#: more than ``liveness_timeout``; never more than MAX_WINDOW.
+ADAPT = 2.0
+MAX_WINDOW = 10.0
 
 #: How long an echo of our own change is waited for; after that, an equal value is news again.
 ECHO_WINDOW = 5.0

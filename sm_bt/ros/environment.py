@@ -63,6 +63,15 @@ def prepare(*, own_domain: bool = False, local_only: bool = True) -> None:
     check_settings()
 
 
+def describe_discovery() -> str:
+    """The discovery settings in effect, in a line: what decides who sees whom."""
+    domain = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0 (unset)"
+    reach = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") or "SUBNET (unset: ROS's default)"
+    peers = os.environ.get("ROS_STATIC_PEERS", "").strip()
+    return (f"ROS_DOMAIN_ID={domain}, ROS_AUTOMATIC_DISCOVERY_RANGE={reach}"
+            + (f", ROS_STATIC_PEERS={peers}" if peers else ""))
+
+
 def require_ros() -> None:
     """Raise :class:`RosUnavailable` with the fix when rclpy or system_modes_msgs is missing."""
     try:

@@ -55,6 +55,7 @@ from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 from sm_bt.engine.events import Event, EventKind, Subscription
 from sm_bt.engine.inference import Actual
 from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, SystemPart
 
@@ -76,9 +77,11 @@ def _mode_label(actual: Actual) -> str:
 class ModeManagerServer:
     """Serve ``manager``'s parts on ``node``; ``close()`` removes the services and topics."""
 
-    def __init__(self, node: Node, manager: ModeManager) -> None:
+    def __init__(self, node: Node, manager: ModeManager,
+                 on_request: Callable[[str, Request], None] | None = None) -> None:
         self._node = node
         self._manager = manager
+        self._on_request = on_request  # told of every request made through the interface
         self._services: list[Any] = []
         self._publishers: list[Any] = []
         self._mode_events: dict[str, Any] = {}
@@ -146,7 +149,10 @@ class ModeManagerServer:
             response.success = False
             return response
         handle = self._manager.change_mode(part, mode)
-        response.success = not (handle.done and not handle.succeeded)
+        self._told(part, handle)
+        # false exactly when nothing was changed: an accepted request that fails later is told by
+        # the events and /diagnostics, and its targets stand
+        response.success = not handle.refused
         if not response.success:  # the manager has logged why (WARNING)
             log.debug("<- change_mode of %s to %r answered false: %s", part, mode, handle.reason)
         return response
@@ -155,10 +161,15 @@ class ModeManagerServer:
         transition: str | int = request.transition.label or int(request.transition.id)
         log.debug("-> callback change_state of %s: %s", part, transition)
         handle = self._manager.change_state(part, transition)
-        response.success = not (handle.done and not handle.succeeded)
+        self._told(part, handle)
+        response.success = not handle.refused
         if not response.success:  # the manager has logged why (WARNING)
             log.debug("<- change_state of %s (%s) answered false: %s", part, transition, handle.reason)
         return response
+
+    def _told(self, part: str, handle: Request) -> None:
+        if self._on_request is not None:
+            self._on_request(part, handle)
 
     def _get_mode(self, part: str, response: Any) -> Any:
         response.current_mode = _mode_label(self._manager.actual(part))

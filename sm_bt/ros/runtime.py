@@ -63,14 +63,16 @@ class RosRuntime:
     ``manager_options`` go to :class:`ModeManager` (``grace_period``, ``request_timeout``, ...),
     ``backend_options`` to :class:`~sm_bt.ros.backend.RosBackend` (``call_timeout``,
     ``liveness_timeout``, ...). ``serve=False`` leaves out the ROS services and topics (the
-    behaviours alone). ``own_domain`` picks a per-run ``ROS_DOMAIN_ID`` when none is set.
+    behaviours alone). ``own_domain`` is for self-contained runs (demo, tests): a per-run
+    ``ROS_DOMAIN_ID`` and discovery on this machine unless set; otherwise the user's settings (and
+    ROS's defaults) apply, so nodes and manager may run on different machines.
     """
 
     def __init__(self, model: Model, *, node_name: str = MANAGER_NODE_NAME, serve: bool = True,
                  own_domain: bool = False, manager_options: Mapping[str, Any] | None = None,
                  backend_options: Mapping[str, Any] | None = None, node: Any = None) -> None:
         if node is None:
-            prepare(own_domain=own_domain)
+            prepare(own_domain=own_domain, local_only=own_domain)
         require_ros()
         import rclpy
         from rclpy.context import Context
@@ -78,6 +80,7 @@ class RosRuntime:
         from rclpy.signals import SignalHandlerOptions
 
         from sm_bt.ros.backend import RosBackend
+        from sm_bt.ros.diagnostics import DiagnosticsPublisher
         from sm_bt.ros.manager_node import ModeManagerServer
 
         self.model = model
@@ -106,14 +109,24 @@ class RosRuntime:
         self.watch_executor = SingleThreadedExecutor(context=self.context)
         self.watch_executor.add_node(self.watch_node)
         self._executors = (self.executor, self.backend_executor, self.watch_executor)
+        spun = [(self.executor, self.node, "executor")] if self._owns_node else []
+        spun += [(self.backend_executor, self.backend_node, "backend"), (self.watch_executor, self.watch_node, "watch")]
+        self._stopping = threading.Event()
+        # One guard condition per spinning executor: triggered by close(), its (empty) callback
+        # makes spin_once() return, so that the thread sees _stopping.
+        self._wakers = [(node, node.create_guard_condition(lambda: None)) for _, node, _ in spun]
         self._threads = [threading.Thread(target=self._spin, args=(executor,), name=f"sm_bt-ros-{name}", daemon=True)
-                         for executor, name in zip(self._executors, ("executor", "backend", "watch"), strict=True)]
+                         for executor, _, name in spun]
         for thread in self._threads:
             thread.start()
         self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node,
                                   **dict(backend_options or {}))
         self.manager = ModeManager(model, self.backend, **dict(manager_options or {}))
-        self.server = ModeManagerServer(self.node, self.manager) if serve else None
+        # The manager's view for operators and aggregators, with the interface it serves.
+        self.diagnostics = DiagnosticsPublisher(self.node, self.manager, self.clock,
+                                                link=self.backend.link) if serve else None
+        self.server = ModeManagerServer(self.node, self.manager,
+                                        self.diagnostics.requested if self.diagnostics else None) if serve else None
         self._closed = False
 
     def set_parameters(self, node: str, values: Mapping[str, ParamValue], timeout: float = 10.0) -> CallResult:
@@ -132,13 +145,15 @@ class RosRuntime:
             return CallResult(False, f"set_parameters on {node}: no answer within {timeout:g} s")
         return results[0]
 
-    @staticmethod
-    def _spin(executor: Any) -> None:
+    def _spin(self, executor: Any) -> None:
         from rclpy.executors import ExternalShutdownException
 
-        # The context shut down under us: nothing left to do.
-        with contextlib.suppress(ExternalShutdownException):
-            executor.spin()
+        # spin() itself cannot be stopped safely: Executor.shutdown() under a spinning thread drops
+        # its guard condition while callbacks may still schedule work (an AttributeError in this
+        # thread). close() sets _stopping and wakes the executor; the loop ends between callbacks.
+        with contextlib.suppress(ExternalShutdownException):  # the context shut down under us
+            while not self._stopping.is_set() and self.context.ok():
+                executor.spin_once()
 
     def wait_for_nodes(self, timeout: float = 10.0, nodes: Sequence[str] | None = None) -> None:
         """Block until the manager reaches every node of the model (or ``nodes``): found on the
@@ -164,14 +179,23 @@ class RosRuntime:
         if self._closed:
             return
         self._closed = True
-        for executor in self._executors:  # a context shut down first has stopped them already
-            _quietly(functools.partial(executor.shutdown, timeout_sec=2.0), "executor shutdown")
-        for thread in self._threads:
-            thread.join(3.0)
+        # First the work (no new calls; those in flight cancelled while their callbacks still have
+        # an executor), then the spinning, then the executors, nodes and context.
         if self.server is not None:  # the application may have destroyed its node first
             _quietly(self.server.close, "removing the interface")
+        if self.diagnostics is not None:
+            _quietly(self.diagnostics.close, "removing the diagnostics")
         self.manager.close()
         self.clock.close()
+        self._stopping.set()
+        for _, waker in self._wakers:
+            _quietly(waker.trigger, "waking the executor")
+        for thread in self._threads:
+            thread.join(3.0)
+        for node, waker in self._wakers:
+            _quietly(functools.partial(node.destroy_guard_condition, waker), "removing the waker")
+        for executor in self._executors:  # a context shut down first has stopped them already
+            _quietly(functools.partial(executor.shutdown, timeout_sec=2.0), "executor shutdown")
         helpers = [self.backend_node, self.watch_node] + ([self.node] if self._owns_node else [])
         for node in helpers:  # the application may have shut the context down first
             _quietly(node.destroy_node, f"destroying {node.get_name()}")

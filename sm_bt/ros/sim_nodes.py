@@ -333,7 +333,7 @@ def run_nodes(
         restore = _stop_on_signals(stop)
     else:
         restore = _nothing
-    environment.prepare()
+    environment.prepare(local_only=False)  # stand-ins for a robot's nodes: the user's discovery settings
     context = Context()
     # No rclpy signal handlers: ours only set `stop`, and the shutdown order stays ours.
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
@@ -424,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--transition-delay", type=non_negative, default=0.0, metavar="SECONDS",
                         help="seconds every transition takes (the nodes' first sim.transition_delay; default 0)")
     args = parser.parse_args(argv)
-    environment.prepare()
+    environment.prepare(local_only=False)  # stand-ins for a robot's nodes: the user's discovery settings
     try:
         model = load(args.model)
     except ModelError as error:

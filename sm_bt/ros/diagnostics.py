@@ -1,0 +1,225 @@
+"""The manager's view on ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``), the ROS convention
+that ``rqt_robot_monitor`` and ``diagnostic_aggregator`` read.
+
+One ``DiagnosticStatus`` per part of the model, named ``"{manager node}: {part}"`` with the part as
+``hardware_id``:
+
+* **OK**: the part is what it was asked to be (or, with no target, its state is known);
+* **WARN**: on its way (a request in flight, a divergence within its grace period), its last
+  request was refused, or its link is slow (answers arrive, late);
+* **ERROR**: unreachable, diverging beyond the grace period, its last request failed and it is
+  not at its target, or recovery gave up on it;
+* **STALE**: a node not seen on the ROS graph yet.
+
+``values`` carry ``target``, ``actual``, ``divergence``, the last request (``last_request``,
+``last_request_outcome``: running/succeeded/failed/refused, ``last_request_reason``,
+``last_request_by``) and for nodes ``reachable``, ``round_trip_ms`` and ``liveness_window_s``.
+
+A part's status goes out as soon as something about it changes (the changed parts only: aggregators
+keep the last status per name), and every part's every ``period`` seconds, as
+``diagnostic_updater`` does, so that a late joiner and the aggregators' staleness checks see it.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from sm_bt.engine.clock import Clock, TimerHandle
+from sm_bt.engine.events import Event, EventKind, Subscription
+from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.requests import Request
+from sm_bt.model.types import NodePart
+
+log = logging.getLogger("sm_bt.ros.diagnostics")
+
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
+#: Every part's status is published this often (seconds), besides every change.
+PERIOD = 1.0
+
+
+@dataclass(frozen=True)
+class PartStatus:
+    """What one part's ``DiagnosticStatus`` says."""
+
+    part: str
+    level: int
+    message: str
+    values: tuple[tuple[str, str], ...]
+
+    def value(self, key: str) -> str:
+        return dict(self.values)[key]
+
+
+def request_outcome(request: Request | None) -> str:
+    if request is None:
+        return ""
+    if not request.done:
+        return "running"
+    if request.refused:
+        return "refused"
+    return "succeeded" if request.succeeded else "failed"
+
+
+def part_status(manager: ModeManager, part: str, last: Request | None, link: Any = None) -> PartStatus:
+    """The status of ``part`` now (call with the manager's lock held); ``last``: its last request,
+    ``link``: for a node, how it answers (:class:`sm_bt.ros.backend.Link`), if known."""
+    actual = manager.actual(part)
+    target = manager.target(part)
+    divergence = manager.divergence(part)
+    node = isinstance(manager.model.parts[part], NodePart)
+    observation = manager.observation(part) if node else None
+    outcome = request_outcome(last)
+    values: list[tuple[str, str]] = [
+        ("target", str(target) if target is not None else ""),
+        ("actual", str(actual)),
+        ("divergence", (f"{divergence.cause.value}" + (f": {divergence.reason}" if divergence.reason else ""))
+         if divergence is not None else ""),
+        ("last_request", f"#{last.id} {last.description}" if last is not None else ""),
+        ("last_request_outcome", outcome),
+        ("last_request_reason", last.reason if last is not None else ""),
+        ("last_request_by", last.requester if last is not None else ""),
+    ]
+    if observation is not None:
+        values.append(("reachable", "true" if observation.reachable else "false"))
+        if link is not None:
+            values.append(("round_trip_ms", f"{link.rtt * 1000:.1f}" if link.rtt is not None else ""))
+            values.append(("liveness_window_s", f"{link.window:.2f}"))
+    at_target = actual.known if target is None else actual.is_(target)
+
+    level, message = OK, str(actual)
+    if observation is not None and not observation.reachable:
+        if observation.gone:
+            level, message = ERROR, f"unreachable: {observation.gone}"
+        else:
+            level, message = STALE, "not found on the ROS graph yet"
+    elif part in manager.failed():
+        level, message = ERROR, f"recovery gave up: {divergence.reason if divergence else actual}"
+    elif divergence is not None and divergence.is_error:
+        level, message = ERROR, f"target {divergence.target}, actual {actual}" + (
+            f" ({divergence.reason})" if divergence.reason else "")
+    elif outcome == "failed" and not at_target:
+        level, message = ERROR, f"request #{last.id} failed: {last.reason}"  # type: ignore[union-attr]
+    elif outcome == "running":
+        level, message = WARN, f"request #{last.id} {last.description}: {last.feedback}"  # type: ignore[union-attr]
+    elif divergence is not None:
+        level, message = WARN, f"target {divergence.target}, actual {actual} ({divergence.cause.value})"
+    elif outcome == "refused":
+        level, message = WARN, f"{actual}; request #{last.id} refused: {last.reason}"  # type: ignore[union-attr]
+    elif not actual.known:
+        level, message = WARN, f"unknown: {actual.reason}" if actual.reason else "unknown"
+    if level == OK and link is not None and link.slow:
+        level, message = WARN, (f"{actual}; slow link: answers in {link.rtt * 1000:.0f} ms, silence for "
+                                f"{link.window:.1f} s means unreachable")
+    return PartStatus(part, level, message, tuple(values))
+
+
+class DiagnosticsPublisher:
+    """Publish ``manager``'s parts on ``/diagnostics`` from ``node``, on change and every ``period``
+    seconds (timed by ``clock``); ``link(node)`` says how a node answers, if the backend knows."""
+
+    def __init__(self, node: Any, manager: ModeManager, clock: Clock, *, period: float = PERIOD,
+                 link: Callable[[str], Any] | None = None, topic: str = "/diagnostics") -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self._node = node
+        self._manager = manager
+        self._clock = clock
+        self._period = period
+        self._link = link
+        self._name = node.get_name()
+        self._publisher = node.create_publisher(DiagnosticArray, topic, 10)
+        self._lock = threading.Lock()
+        self._last: dict[str, Request] = {}
+        self._dirty: set[str] = set()
+        self._flush: TimerHandle | None = None
+        self._closed = False
+        with manager.lock:
+            self._subscription: Subscription | None = manager.subscribe(self._on_event)
+        self._timer: TimerHandle | None = clock.call_later(0.0, self._publish_all)
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            for timer in (self._timer, self._flush):
+                if timer is not None:
+                    timer.cancel()
+        if self._subscription is not None:
+            self._subscription.cancel()
+            self._subscription = None
+        self._node.destroy_publisher(self._publisher)
+
+    def requested(self, part: str, request: Request) -> None:
+        """A request made outside the engine's events (a refusal is done at once, with no event)."""
+        self._note(part, request)
+
+    # -- events (in the manager's lock) --------------------------------------------------------------
+
+    def _on_event(self, event: Event) -> None:
+        if event.kind is EventKind.REQUEST and event.request is not None:
+            self._note(event.request.part, event.request)
+        elif event.kind in (EventKind.ACTUAL, EventKind.TARGET, EventKind.DIVERGENCE, EventKind.FAILED):
+            self._changed(event.part)
+
+    def _note(self, part: str, request: Request) -> None:
+        with self._lock:
+            self._last[part] = request
+        self._changed(part)
+
+    def _changed(self, part: str) -> None:
+        with self._lock:
+            if self._closed or part not in self._manager.model.parts:
+                return
+            self._dirty.add(part)
+            if self._flush is None:  # one publication for a burst of events
+                self._flush = self._clock.call_later(0.0, self._publish_dirty)
+
+    # -- publishing (clock thread) ---------------------------------------------------------------------
+
+    def _publish_dirty(self) -> None:
+        with self._lock:
+            parts, self._dirty, self._flush = sorted(self._dirty), set(), None
+        self._publish(parts)
+
+    def _publish_all(self) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._timer = self._clock.call_later(self._period, self._publish_all)
+        self._publish(list(self._manager.model.parts))
+
+    def statuses(self, parts: list[str]) -> list[PartStatus]:
+        manager = self._manager
+        with manager.lock:
+            with self._lock:
+                last = {part: self._last.get(part) for part in parts}
+            return [part_status(manager, part, last[part], self._link_of(part)) for part in parts]
+
+    def _link_of(self, part: str) -> Any:
+        if self._link is None or not isinstance(self._manager.model.parts[part], NodePart):
+            return None
+        try:
+            return self._link(part)
+        except KeyError:
+            return None
+
+    def _publish(self, parts: list[str]) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+        if not parts or self._closed:
+            return
+        message = DiagnosticArray()
+        message.header.stamp = self._node.get_clock().now().to_msg()
+        message.status = [
+            DiagnosticStatus(level=bytes([status.level]), name=f"{self._name}: {status.part}", message=status.message,
+                             hardware_id=status.part, values=[KeyValue(key=k, value=v) for k, v in status.values])
+            for status in self.statuses(parts)]
+        try:
+            self._publisher.publish(message)
+        except Exception:  # the node is going away (shutdown): nothing to tell anyone any more
+            log.debug("publishing diagnostics failed", exc_info=True)
+
