@@ -323,6 +323,10 @@ class ModeManager:
         with self._entry():
             log.warning("node %s vanished: %s", node, reason)
             self._apply(self._inference.node_vanished(node, reason))
+            # A request that needs it cannot complete while it is out of reach: it ends now, not
+            # when one of its calls times out (a node that waits for its turn has none in flight).
+            for execution in [e for e in self._executions.values() if node in e.scope]:
+                self.finish(execution, False, f"{node} is not reachable ({reason})")
             self._drivers[node].advance()
 
     # -- what drivers need ------------------------------------------------------------------------
