@@ -39,7 +39,7 @@ from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodeMode
 
 SYSTEM = "robot"
-P1_GOAL, P2_GOAL_MS, IDLE_GOAL, VANISH_GOAL = 1.25, 10.0, 1.0, 2.0
+P1_GOAL, P2_GOAL_MS, IDLE_GOAL, VANISH_GOAL = 1.25, 10.0, 1.0, 1.0
 TIMEOUT = 20.0
 
 

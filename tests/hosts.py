@@ -534,17 +534,24 @@ class Hosts:
     def sm_bt(self, *args: str, timeout: float = CLI_TIMEOUT, side: str = "brain") -> tuple[int, str, str]:
         """``python -m sm_bt.cli ARGS`` on ``side``: (exit code, stdout, stderr). Past ``timeout`` s it is
         stopped (SIGINT, SIGKILL 3 s later), its code is the signal's, and stderr says so."""
-        process = subprocess.Popen(self.command(side, sys.executable, "-m", "sm_bt.cli", *args),
-                                   stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                   text=True)
+        code, out, err, timed_out = self._run(self.command(side, sys.executable, "-m", "sm_bt.cli", *args), timeout)
+        if timed_out:
+            err += f"\n[hosts: sm-bt {' '.join(args)} stopped after the harness's {timeout:g} s limit]\n"
+        return code, out, err
+
+    def _run(self, command: list[str], timeout: float) -> tuple[int, str, str, bool]:
+        """Run ``command`` to its end: (exit code, stdout, stderr, stopped at ``timeout``)."""
+        process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True)
         self.processes.append(process)
         try:
             out, err = process.communicate(timeout=timeout)
+            timed_out = False
         except subprocess.TimeoutExpired:
             stop_processes([process])
             out, err = process.communicate()
-            err += f"\n[hosts: sm-bt {' '.join(args)} stopped after the harness's {timeout:g} s limit]\n"
-        return process.returncode, out, err
+            timed_out = True
+        return process.returncode, out, err, timed_out
 
     def watch(self, topic: str, type_name: str, *, durability: str | None = None, side: str = "brain") -> Watch:
         """A subscriber to ``topic`` on ``side`` (``tests/host_agent.py watch``), subscribed already.
@@ -566,20 +573,15 @@ class Hosts:
         """ICMP echo from ``side`` to the other side (``tests/host_agent.py ping``)."""
         other = self.addresses["brain" if side == "robot" else "robot"]
         limit = count * interval + wait + 15.0
-        process = subprocess.Popen(self.command(side, sys.executable, str(AGENT), "ping", other, "--count",
-                                                str(count), "--interval", str(interval), "--wait", str(wait)),
-                                   stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                   text=True)
-        self.processes.append(process)
-        try:
-            out, err = process.communicate(timeout=limit)
-        except subprocess.TimeoutExpired:
-            stop_processes([process])
-            raise AssertionError(f"ping from {side} did not end within {limit:g} s") from None
+        code, out, err, timed_out = self._run(self.command(side, sys.executable, str(AGENT), "ping", other, "--count",
+                                                           str(count), "--interval", str(interval), "--wait",
+                                                           str(wait)), limit)
+        if timed_out:
+            raise AssertionError(f"ping from {side} did not end within {limit:g} s")
         rtts = [float(line.split()[2]) for line in out.splitlines() if line.startswith("REPLY ")]
         summary = [line for line in out.splitlines() if line.startswith("SUMMARY ")]
-        if process.returncode != 0 or not summary:
-            raise AssertionError(f"ping from {side}: exit {process.returncode}\n{out}\n{err}")
+        if code != 0 or not summary:
+            raise AssertionError(f"ping from {side}: exit {code}\n{out}\n{err}")
         fields = dict(word.split("=") for word in summary[0].split()[1:])
         return Ping(int(fields["sent"]), int(fields["received"]), float(fields["loss"]), rtts)
 

@@ -328,3 +328,18 @@ def test_a_divergence_a_request_works_on_is_announced_when_it_starts_and_ends_no
     rig.run(0.02)
     record = rig.manager.divergence("pilot")
     assert record is not None and record.actual == rig.manager.actual("pilot")
+
+
+def test_a_request_ends_when_a_node_it_needs_vanishes_even_with_no_call_on_it() -> None:
+    # amcl hangs in configure, so the request waits; meanwhile pointcloud_to_laser, already at
+    # its goal with no call in flight, vanishes: the request cannot complete.
+    rig = Rig(bundled("pilot"), rules=False, recovery=False, vanish_after=0.5)
+    rig.backend.hang_next("amcl", Transition.CONFIGURE)
+    request = rig.manager.change_mode("pilot", "f_normal_mode", timeout=30.0)
+    rig.run(0.5)
+    assert not request.done and rig.manager.observation("pointcloud_to_laser").state is State.INACTIVE
+    rig.backend.crash("pointcloud_to_laser")
+    took = rig.until(lambda: request.done, limit=5.0)
+    assert took <= 0.5 + 0.02, took
+    assert not request.succeeded and not request.refused
+    assert request.reason.startswith("pointcloud_to_laser is not reachable (no answer for"), request.reason

@@ -25,6 +25,7 @@ from sm_bt.ros.runtime import RosRuntime
 WINDOW = 0.8
 #: What the verdict may take beyond the window: the clock thread's wake-up and the report.
 LATENCY = 0.2
+NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
 REASON = re.compile(r"no answer from /(\w+) for 0\.[89] s \(node exited, or network unreachable\)")
 
 
@@ -110,6 +111,7 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
     _reachable(runtime)
     wait_until(lambda: statuses(received, "pilot"), 5.0, "no /diagnostics")
     manager = runtime.manager
+    clients = {name: runtime.backend._peers[name].change_state for name in NODES}
     with Stopped(nodes) as stopped:
         request = manager.change_mode("pilot", "f_normal_mode")
         assert not request.refused, "the manager did not know yet: accepted"
@@ -118,6 +120,10 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
                                          f"{stopped.at:.2f})"
         assert not request.succeeded
         assert REASON.search(request.reason), request.reason
+        # The configure requests abandoned unanswered are dropped with their clients: a DDS writer
+        # would send them again once the node answers, and the node would configure late.
+        renewed = [name for name in NODES if runtime.backend._peers[name].change_state is not clients[name]]
+        assert "amcl" in renewed and "pointcloud_to_laser" not in renewed, renewed  # the latter stays inactive
         # What the manager knows now: the change is refused as a whole, and changes nothing.
         refused = manager.change_mode("pilot", "f_degraded_mode")
         assert refused.refused and "not reachable" in refused.reason

@@ -219,21 +219,14 @@ def _words(key: str) -> str:
     return key.strip("/").replace("/", " ").replace("_", " ")
 
 
-class LevelAtLeast(PortsMixin, py_trees.behaviour.Behaviour):
-    """Is the number at blackboard ``key`` at least ``threshold``? SUCCESS if it is, FAILURE if
-    it is below (or nothing was written yet); never RUNNING. The feedback is the comparison as a
-    person reads it (``battery level 0.48 < 0.5``). In XML
-    ``<LevelAtLeast name="Battery OK?" key="/battery/level" threshold="0.5"/>``."""
+class _BlackboardCheck(PortsMixin, py_trees.behaviour.Behaviour, register=False):
+    """A check of one blackboard variable, ``key`` (read only); no ports."""
 
     INPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012 (py_trees' read-only declaration)
     OUTPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012
 
-    def __init__(self, name: str, key: str, threshold: float | str, **kwargs: Any) -> None:
+    def __init__(self, name: str, key: str, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
-        try:
-            self.threshold = float(threshold)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name}: threshold must be a number, not {threshold!r}") from None
         self.key = key
         self.blackboard = self.attach_blackboard_client(name)
         self.blackboard.register_key(key, access=Access.READ)
@@ -244,9 +237,27 @@ class LevelAtLeast(PortsMixin, py_trees.behaviour.Behaviour):
             raise KeyError(f"{self.name}: no ports (given: {', '.join(port_remappings)})")
         self._subtree_namespace = subtree_namespace
 
+    def _current(self) -> Any:
+        """The value at ``key``, ``None`` while nothing was written."""
+        return self.blackboard.get(self.key) if self.blackboard.exists(self.key) else None
+
+
+class LevelAtLeast(_BlackboardCheck):
+    """Is the number at blackboard ``key`` at least ``threshold``? SUCCESS if it is, FAILURE if
+    it is below (or nothing was written yet); never RUNNING. The feedback is the comparison as a
+    person reads it (``battery level 0.48 < 0.5``). In XML
+    ``<LevelAtLeast name="Battery OK?" key="/battery/level" threshold="0.5"/>``."""
+
+    def __init__(self, name: str, key: str, threshold: float | str, **kwargs: Any) -> None:
+        try:
+            self.threshold = float(threshold)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}: threshold must be a number, not {threshold!r}") from None
+        super().__init__(name, key, **kwargs)
+
     def update(self) -> Status:
         """SUCCESS when the value is at least the threshold, FAILURE otherwise."""
-        value = self.blackboard.get(self.key) if self.blackboard.exists(self.key) else None
+        value = self._current()
         if not isinstance(value, int | float) or isinstance(value, bool):
             self.feedback_message = f"no {_words(self.key)} yet"
             return Status.FAILURE
@@ -254,30 +265,18 @@ class LevelAtLeast(PortsMixin, py_trees.behaviour.Behaviour):
         return Status.SUCCESS if value >= self.threshold else Status.FAILURE
 
 
-class FlagIs(PortsMixin, py_trees.behaviour.Behaviour):
+class FlagIs(_BlackboardCheck):
     """Does the boolean blackboard variable ``key`` hold ``value``? SUCCESS if it does,
     FAILURE if not (or if nothing was written yet); never RUNNING. In XML
     ``<FlagIs name="Battery low?" key="/components/battery" value="false"/>``."""
 
-    INPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012 (py_trees' read-only declaration)
-    OUTPUT_PORTS: dict[str, PortInformation] = {}  # noqa: RUF012
-
     def __init__(self, name: str, key: str, value: bool | str = True, **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
-        self.key = key
         self.value = flag(name, value, "value")
-        self.blackboard = self.attach_blackboard_client(name)
-        self.blackboard.register_key(key, access=Access.READ)
-
-    def setup_ports(self, port_remappings: dict[str, str] | None = None, subtree_namespace: str = "/",
-                    logger: Any = None) -> None:
-        if port_remappings:
-            raise KeyError(f"{self.name}: no ports (given: {', '.join(port_remappings)})")
-        self._subtree_namespace = subtree_namespace
+        super().__init__(name, key, **kwargs)
 
     def update(self) -> Status:
         """SUCCESS when ``key`` is ``value``, FAILURE otherwise."""
-        current = self.blackboard.get(self.key) if self.blackboard.exists(self.key) else None
+        current = self._current()
         if current is None:
             self.feedback_message = f"no {_words(self.key)} yet"
         elif self.key.startswith("/components/") and isinstance(current, bool):  # True = component OK

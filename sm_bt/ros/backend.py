@@ -140,7 +140,6 @@ class _Peer:
     # link): the estimate behind the liveness window.
     srtt: float | None = None
     rttvar: float = 0.0
-    window: float = 0.0  # the liveness window now (shared by the nodes of its process)
     retired: list[Any] = field(default_factory=list)  # clients replaced while a call was still on them
 
     @property
@@ -183,7 +182,7 @@ class RosBackend:
     """
 
     def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
-                 acquire_timeout: float = 2.0, probe_interval: float = 0.2, liveness_timeout: float = 0.8,
+                 acquire_timeout: float = 2.0, probe_interval: float = 0.3, liveness_timeout: float = 0.8,
                  plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 1.0,
                  graph_interval: float = 1.0, watch_node: Node | None = None) -> None:
         self._node = node
@@ -218,14 +217,15 @@ class RosBackend:
         """How ``node`` answers now: its round trip and liveness window."""
         peer = self._peer(node)
         with self._lock:
-            window = max(peer.window, self._window_of(peer))
-            return Link(peer.srtt, window, window > self.liveness_timeout + _SLACK)
+            members = self._members(peer)
+            window = self._window(members)
+            rtt = next((m.srtt for m in members if m.srtt is not None), None)  # the probed one's
+            return Link(rtt, window, window > self.liveness_timeout + _SLACK)
 
-    def _window_of(self, peer: _Peer) -> float:
-        """The liveness window its own round trips call for (lock held)."""
-        if peer.srtt is None:
-            return self.liveness_timeout
-        return min(max(self.liveness_timeout, ADAPT * (peer.srtt + 4 * peer.rttvar)), MAX_WINDOW)
+    def _window(self, members: list[_Peer]) -> float:
+        """The liveness window of a process, from the round trips of its probes (lock held)."""
+        estimates = [ADAPT * (m.srtt + 4 * m.rttvar) for m in members if m.srtt is not None]
+        return min(max([self.liveness_timeout, *estimates]), MAX_WINDOW)
 
     # -- Backend protocol ---------------------------------------------------------------------------
 
@@ -413,7 +413,8 @@ class RosBackend:
                 self._poll_timer = self._clock.call_later(
                     self.idle_poll_interval if settled else self.poll_interval, self._poll)
 
-    def _share_liveness(self, peers: list[_Peer]) -> set[_Peer]:
+    @staticmethod
+    def _share_liveness(peers: list[_Peer]) -> set[_Peer]:
         """Nodes of one participant live and die together (lock held): each hears what any of them
         heard, and one of them that is not busy is probed for all. Returns the ones to probe."""
         groups: dict[bytes | str, list[_Peer]] = {}
@@ -424,9 +425,8 @@ class RosBackend:
         for members in groups.values():
             heard = max(member.last_heard for member in members)
             asked = max(member.last_probe for member in members)
-            window = max(self._window_of(member) for member in members)
             for member in members:
-                member.last_heard, member.last_asked, member.window = heard, asked, window
+                member.last_heard, member.last_asked = heard, asked
             probing = next((member for member in members if member.probe is not None), None)
             probed.add(probing or next((m for m in members if not m.busy), members[0]))
         return probed
@@ -446,7 +446,7 @@ class RosBackend:
                 gone = not (lifecycle_ready if peer.lifecycle else parameters_ready)
                 # Silent: asked since it (or a node of its process) was last heard, and no word
                 # for the window (the probe chain usually tells first: this is the safety net).
-                silent = (not self._working(peer) and now - peer.last_heard > max(peer.window, self._window_of(peer))
+                silent = (not self._working(peer) and now - peer.last_heard > self._window(self._members(peer))
                           and peer.last_asked > peer.last_heard)
                 probe_due = probed and peer.probe is None and now - peer.last_probe >= self.probe_interval
             if presence is _Presence.ABSENT:
@@ -531,8 +531,7 @@ class RosBackend:
             # Unanswered by the end of the window (from the last word of its process): the verdict.
             members = self._members(peer)
             heard = max(m.last_heard for m in members)
-            window = max(self._window_of(m) for m in members)
-            timeout = max(heard + window - now, self.probe_interval)
+            timeout = max(heard + self._window(members) - now, self.probe_interval)
 
         def answered(response: Any) -> None:
             self._clock.call_later(self.probe_interval, lambda: self._probe_if_due(peer))
@@ -597,7 +596,7 @@ class RosBackend:
         with self._lock:
             members = self._members(peer)
             heard = max(m.last_heard for m in members)
-            window = max(max(m.window, self._window_of(m)) for m in members)
+            window = self._window(members)
             working = self._working(peer)
             silent = [] if working or now - heard < window - _SLACK else \
                 [m for m in members if m.presence is _Presence.PRESENT]
@@ -714,14 +713,20 @@ class RosBackend:
                 return
             call.finished = True
             call.peer.calls.discard(call)
+            retired = call.client in call.peer.retired and not any(
+                other.client is call.client for other in call.peer.calls)
+            if retired:
+                call.peer.retired.remove(call.client)
         if call.timer is not None:
             call.timer.cancel()
+        if failure is not None and call.future is not None and not call.future.done():
+            call.client.remove_pending_request(call.future)
+            call.future.cancel()
+            if call.busy and self._listener is not None:
+                self._renew_client(call)
+        if retired:  # replaced earlier; this was the last call of ours on it
+            self._node.destroy_client(call.client)
         if failure is not None:
-            if call.future is not None and not call.future.done():
-                call.client.remove_pending_request(call.future)
-                call.future.cancel()
-                if call.busy and self._listener is not None:
-                    self._renew_client(call)
             if call.on_failure is not None:
                 call.on_failure(failure)
         elif call.on_result is not None:

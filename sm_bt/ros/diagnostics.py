@@ -15,8 +15,8 @@ One ``DiagnosticStatus`` per part of the model, named ``"{manager node}: {part}"
 ``last_request_outcome``: running/succeeded/failed/refused, ``last_request_reason``,
 ``last_request_by``) and for nodes ``reachable``, ``round_trip_ms`` and ``liveness_window_s``.
 
-A part's status goes out as soon as something about it changes (the changed parts only: aggregators
-keep the last status per name), and every part's every ``period`` seconds, as
+A part's status goes out within ``GATHER`` (0.1 s) of a change (the changed parts only, one message
+per burst: aggregators keep the last status per name), and every part's every ``period`` seconds, as
 ``diagnostic_updater`` does, so that a late joiner and the aggregators' staleness checks see it.
 """
 
@@ -40,6 +40,9 @@ OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
 #: Every part's status is published this often (seconds), besides every change.
 PERIOD = 1.0
+#: Changes are gathered this long before they go out: one message for a change's burst of events,
+#: built after the change rather than in the middle of it (the clock thread also carries the calls).
+GATHER = 0.1
 
 
 @dataclass(frozen=True)
@@ -176,7 +179,7 @@ class DiagnosticsPublisher:
                 return
             self._dirty.add(part)
             if self._flush is None:  # one publication for a burst of events
-                self._flush = self._clock.call_later(0.0, self._publish_dirty)
+                self._flush = self._clock.call_later(GATHER, self._publish_dirty)
 
     # -- publishing (clock thread) ---------------------------------------------------------------------
 
