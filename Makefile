@@ -42,12 +42,13 @@ test: $(STAMP)
 
 # The manager's property tests (tests/test_manager_properties.py) and the loader's fuzz tests
 # (tests/test_model_fuzz.py) with the hypothesis `stress` profile: at least 10,000 scenarios and
-# 100,000 model files, then a summary (requests by outcome, recoveries, rules, files by outcome).
+# 100,000 model files, then a summary (requests by outcome, recoveries, rules, files by outcome);
+# and 30 partition/heal cycles across two hosts (tests/stress_partitions.py: network namespaces, root).
 .PHONY: stress
 stress: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
-	SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests $(BIN)/python -m pytest -q -p stress_summary \
-		tests/test_manager_properties.py tests/test_model_fuzz.py
+	SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests $(BIN)/python -m pytest -q -s -p stress_summary \
+		tests/test_manager_properties.py tests/test_model_fuzz.py tests/stress_partitions.py
 
 # The performance goals (README, "Performance"): a table with each goal, build/bench/results.json
 # and build/bench/scaling.png; exit status 1 if a goal is not met. About 10 minutes on 2 cores.

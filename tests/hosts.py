@@ -22,7 +22,9 @@ test's own); :meth:`Hosts.ping` measures the link.
 DDS across: every process the harness starts in a namespace gets ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``,
 the session's ``ROS_DOMAIN_ID``, a ``ROS_LOG_DIR`` in the harness's temp dir and a Fast DDS profile
 (``FASTRTPS_DEFAULT_PROFILES_FILE``) with a UDPv4 transport only: the namespaces share ``/dev/shm``, and
-Fast DDS's shared-memory transport would otherwise bypass the link. Each namespace routes multicast
+Fast DDS's shared-memory transport would otherwise bypass the link. Its writers send a heartbeat every
+0.1 s (Fast DDS's default: 3 s), as the README advises for a lossy link: a lost sample is repaired only
+after the writer's next heartbeat. Each namespace routes multicast
 (224.0.0.0/4) over its veth, so discovery is plain multicast, no static peers. The test process itself
 stays in the machine's own namespace with local-only discovery: whatever talks to the namespaced nodes
 (the CLI, topic watchers, pings) runs as a child process inside a namespace.
@@ -91,6 +93,11 @@ FAST_DDS_PROFILE = """\
       <useBuiltinTransports>false</useBuiltinTransports>
     </rtps>
   </participant>
+  <data_writer profile_name="sm_bt_hosts_writer" is_default_profile="true">
+    <times>
+      <heartbeatPeriod><sec>0</sec><nanosec>100000000</nanosec></heartbeatPeriod>
+    </times>
+  </data_writer>
 </profiles>
 """
 

@@ -3,8 +3,10 @@ levels and words; test_ros_liveness checks them on the wire)."""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
+import pytest
 from engine_helpers import Rig, bundled
 
 from sm_bt.engine.lifecycle import Transition
@@ -92,3 +94,28 @@ def test_a_fault_beyond_the_grace_period_is_an_error() -> None:
     amcl = status(rig, "amcl")
     assert amcl.level == ERROR and amcl.message.startswith("target active"), amcl.message
     assert amcl.value("divergence").startswith("fault")
+
+
+def test_a_node_back_from_out_of_reach_says_how_it_came_back(caplog: pytest.LogCaptureFixture) -> None:
+    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    assert status(rig, "amcl").value("last_return") == ""
+    rig.backend.crash("amcl")
+    rig.until(lambda: not rig.manager.observation("amcl").reachable)
+    rig.run(3.0)
+    with caplog.at_level(logging.INFO, logger="sm_bt.manager"):
+        rig.backend.restart("amcl")
+        rig.run(0.5)
+    back = rig.manager.last_return("amcl")
+    assert back is not None and back.changed and round(back.away, 1) == 3.0
+    said = "unconfigured (back after 3.0 s; was active.__DEFAULT__)"
+    assert status(rig, "amcl").value("last_return") == said
+    assert f"node amcl appeared: {said}" in caplog.messages, caplog.messages
+    # Back as it was: said so too.
+    rig.finish(rig.manager.change_state("amcl", "configure"))
+    rig.backend.crash("amcl")
+    rig.until(lambda: not rig.manager.observation("amcl").reachable)
+    rig.backend.restart("amcl", "inactive")
+    rig.run(0.5)
+    back = rig.manager.last_return("amcl")
+    assert back is not None and not back.changed and back.describe().startswith("inactive (back after ")

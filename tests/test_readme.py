@@ -51,7 +51,8 @@ KINDS: dict[str, list[tuple[str, re.Pattern[str]]]] = {
                ("compile", re.compile(r"compile \(.+\)"))],
     "yaml": [("model", re.compile(r"")), ("file", re.compile(r"file (\S+)")),
              ("part", re.compile(r"part of (\S+)"))],
-    "xml": [("tree", re.compile(r"file (\S+), checked against (\S+)"))],
+    "xml": [("tree", re.compile(r"file (\S+), checked against (\S+)")),
+            ("dds profile", re.compile(r"fast dds profile, the one (\S+) uses"))],
     "sh": [("commands", re.compile(r"")), ("skip", re.compile(r"skip \(.+\)"))],
     "text": [("transcript", re.compile(r"run")), ("ros transcript", re.compile(r"run ros (\S+) \(.+\)")),
              ("layout", re.compile(r"layout"))],
@@ -186,6 +187,25 @@ def test_xml_examples_are_the_files_they_show_and_check_clean(block: Block) -> N
     path, model = block.kind[1]
     assert (ROOT / path).read_text(encoding="utf-8") == block.text, f"{block} differs from {path}"
     assert check_tree(ROOT / path, sm_bt.load_model(sm_bt.models.path(model))) == []
+
+
+@by_line(of_kind("dds profile"))
+def test_fast_dds_profiles_are_the_ones_the_tests_use(block: Block) -> None:
+    """What the README advises is what the tests measured with: the block's writer settings are
+    in the profile that the named module gives its processes."""
+    (path,) = block.kind[1]
+    import xml.etree.ElementTree as ElementTree
+
+    namespace = "{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}"
+    advised = ElementTree.fromstring(block.text.encode("utf-8")).find(f"{namespace}data_writer")
+    assert advised is not None and advised.get("is_default_profile") == "true", f"{block}: no default data_writer"
+    module = (ROOT / path).read_text(encoding="utf-8")
+    used_text = re.search(r'FAST_DDS_PROFILE = """\\\n(.*?)"""', module, re.S)
+    assert used_text is not None, f"{path} has no FAST_DDS_PROFILE"
+    used = ElementTree.fromstring(used_text.group(1).encode("utf-8")).find(f"{namespace}data_writer")
+    assert used is not None, f"{path}'s profile has no data_writer"
+    times = f"{namespace}times"
+    assert ElementTree.tostring(advised.find(times)) == ElementTree.tostring(used.find(times))
 
 
 # -- shell ----------------------------------------------------------------------------------------------

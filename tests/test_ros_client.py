@@ -96,6 +96,20 @@ def test_with_no_manager_the_commands_say_what_to_check_within_the_timeout(
                    "MODEL`) running, with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?\n")
 
 
+def test_a_node_that_does_not_answer_is_told_apart_from_a_missing_manager(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    manager = start_manager()
+    node_processes("pilot", "--only", "controller_server")
+    manager.ready()
+    code, out, err = sm_bt(capsys, "state", "get", "amcl", "--timeout", "1.5")
+    assert (code, out) == (1, "")
+    assert err == ("sm-bt: error: nothing answers /amcl/get_state within 1.5 s: amcl is a node, and its mode manager "
+                   "answers but the node does not: it is not running, or the network to it is down (`sm-bt mode get "
+                   "amcl` shows what the manager knows)\n"), err
+    assert sm_bt(capsys, "state", "get", "controller_server")[1] == "controller_server: unconfigured\n"
+
+
 def test_monitor_next_to_a_running_manager_watches_and_refuses_to_act(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter,
         capsys: pytest.CaptureFixture[str]) -> None:

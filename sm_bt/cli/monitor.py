@@ -38,6 +38,8 @@ DISCOVERY = 5.0  # --ros: wall seconds to wait for the model's nodes before the 
 # --ros --change: wall seconds to look for another manager's services after the nodes were found
 # (a manager's endpoints are discovered independently of, and can arrive after, the nodes')
 MANAGER_LOOKOUT = 1.5
+#: Once one is found, how long the list of parts it serves must stay the same to be complete.
+MANAGER_SETTLE = 0.25
 ROS_NODE_NAME = "sm_bt_monitor"  # not the reference manager's name: a manager may run alongside
 _EPSILON = 1e-9
 
@@ -191,11 +193,16 @@ def _served_by_a_manager(node: Any, model: Model, lookout: float = MANAGER_LOOKO
     """The model's parts whose ``change_mode`` another process serves, looked for on the ROS graph
     for up to ``lookout`` wall seconds (empty when none appears)."""
     give_up = time.monotonic() + lookout
+    parts: list[str] = []
+    grew = 0.0
     while True:
         served = {name[1:-len("/change_mode")] for name, types in node.get_service_names_and_types()
                   if name.endswith("/change_mode") and "system_modes_msgs/srv/ChangeMode" in types}
-        parts = [part for part in model.parts if part in served]
-        if parts or time.monotonic() >= give_up:
+        now = time.monotonic()
+        found = [part for part in model.parts if part in served]
+        if len(found) > len(parts):  # a manager's services are discovered one by one: name them all
+            parts, grew = found, now
+        if (parts and now - grew >= MANAGER_SETTLE) or now >= give_up:
             return parts
         time.sleep(0.05)
 

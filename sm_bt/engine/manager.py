@@ -30,6 +30,7 @@ import logging
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
 from types import TracebackType
 
 from sm_bt.engine.backend import Backend, CallResult, Done, NodeReport
@@ -121,6 +122,8 @@ class ModeManager:
         self._confirming: dict[str, set[Execution]] = {}  # part -> executions waiting for its actual
         self._last_mode: dict[str, str] = {}  # the last active mode asked for, kept over deactivation
         self._reported: set[str] = set()  # divergences already logged as errors
+        self._away: dict[str, tuple[float, Actual]] = {}  # vanished nodes: since when, and as they were
+        self._returns: dict[str, Return] = {}  # the last time each node came back
         self._agenda: deque[Callable[[], None]] = deque()
         self._outbox = Outbox()
         # A tuple, replaced on (un)subscribe: notifying iterates it with no copy.
@@ -213,6 +216,11 @@ class ModeManager:
         with self._lock:
             return self._inference.observation(node)
 
+    def last_return(self, node: str) -> Return | None:
+        """How ``node`` came back the last time it had vanished (``None``: it never did)."""
+        with self._lock:
+            return self._returns.get(node)
+
     # -- commands ---------------------------------------------------------------------------------
 
     def change_mode(self, part: str, mode: str, *, timeout: float | None = None, requester: str = "user") -> Request:
@@ -300,11 +308,19 @@ class ModeManager:
 
     def _node_appeared(self, node: str, report: NodeReport) -> None:
         with self._entry():
-            log.info("node %s appeared: %s%s", node, report.state.label,
-                     "" if report.lifecycle else " (parameters only)")
+            away = self._away.pop(node, None)
+            if away is None:
+                log.info("node %s appeared: %s%s", node, report.state.label,
+                         "" if report.lifecycle else " (parameters only)")
             self._renew_budgets([node])
             self._drivers[node].node_appeared(report.state)
             self._apply(self._inference.node_appeared(node, report.state, report.parameters, report.lifecycle))
+            if away is not None:  # what changed while it was out of reach (recovery logs what it does)
+                since, before = away
+                after = self._inference.actual(node).state_mode
+                back = Return(node, self.clock.now() - since, before.state_mode, after)
+                self._returns[node] = back
+                log.info("node %s appeared: %s", node, back.describe())
             self._drivers[node].advance()
 
     def _node_state(self, node: str, state: State) -> None:
@@ -322,6 +338,7 @@ class ModeManager:
     def _node_vanished(self, node: str, reason: str) -> None:
         with self._entry():
             log.warning("node %s vanished: %s", node, reason)
+            self._away.setdefault(node, (self.clock.now(), self._inference.actual(node)))
             self._apply(self._inference.node_vanished(node, reason))
             # A request that needs it cannot complete while it is out of reach: it ends now, not
             # when one of its calls times out (a node that waits for its turn has none in flight).
@@ -724,3 +741,23 @@ class _Listener:
     def node_vanished(self, node: str, reason: str) -> None:
         self._manager._node_vanished(node, reason)
 
+
+
+@dataclass(frozen=True)
+class Return:
+    """A node that had vanished, back: how long it was away, and its state and mode before and after."""
+
+    node: str
+    away: float  # seconds
+    before: StateMode
+    after: StateMode
+
+    @property
+    def changed(self) -> bool:
+        return self.before != self.after
+
+    def describe(self) -> str:
+        """``unconfigured (back after 4.2 s; was active.f_normal)``, or ``... (back after 4.2 s, as before)``."""
+        if self.changed:
+            return f"{self.after} (back after {self.away:.1f} s; was {self.before})"
+        return f"{self.after} (back after {self.away:.1f} s, as before)"

@@ -19,7 +19,14 @@ What the reference manager does not do, and this backend does:
   (so a crash or a cut is reported within that long of the last word), wider where the answers
   are slow. The window adapts to the round trips actually observed (``2 x (srtt + 4 rttvar)``,
   TCP's estimator): a node behind a slow or lossy link, where reliable DDS delivery retransmits,
-  is slow, not gone (:meth:`RosBackend.link` says how slow). The graph is looked at every
+  is slow, not gone (:meth:`RosBackend.link` says how slow). A probe that is late (past twice
+  its expected round trip, ``escalate_interval`` s at least) is backed by more, on paths of their
+  own (the other nodes of the process, their other query services), one at first and twice as many
+  every ``escalate_interval`` s of silence: reliable DDS delivers each reader's samples in order and
+  repairs a lost one only after the writer's next heartbeat, so a lost datagram holds back its own
+  path, not the others, and a link that just turned lossy still gets an answer through within the
+  window while a cut gets none.
+  The graph is looked at every
   ``poll_interval`` s while a node is missing, every ``idle_poll_interval`` s once all are present
   (``graph_interval`` for the services of present nodes: the costly part).
   A node working on a long transition of ours blocks its other services: while every node of its
@@ -28,6 +35,9 @@ What the reference manager does not do, and this backend does:
   one. A call that the node never acknowledged with an event does not hold the verdict back, so
   a change in flight when the network is cut fails within the window. A node
   that leaves the graph cleanly is reported at once.
+* **Either path confirms.** A transition or parameter set of ours is done when its answer comes,
+  or when the node's own events show it done (its goal state; every value applied), whichever is
+  first: over a lossy link each path is held back by its own lost datagrams only.
 * **Timeouts everywhere.** Every call has one; a call that times out fails and is removed from
   the client, and every call in flight on a vanished node fails with the reason.
 * **Safe transitions.** Requests carry the transition's id *and* label: rclpy looks the label up
@@ -53,7 +63,7 @@ from typing import Any
 from lifecycle_msgs.msg import Transition as TransitionMsg
 from lifecycle_msgs.msg import TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetAvailableTransitions, GetState
-from rcl_interfaces.msg import ParameterEvent
+from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_parameter_events
@@ -98,6 +108,16 @@ class _SetInFlight:
     values: dict[str, ParamValue]
     outside_before: dict[str, int]
     echoed: set[str] = field(default_factory=set)
+    call: _Call | None = None
+
+
+@dataclass(eq=False)
+class _TransitionInFlight:
+    """A transition of ours not answered yet, and the states its node's events told meanwhile."""
+
+    goal: State | None
+    seen: list[State] = field(default_factory=list)
+    call: _Call | None = None
 
 
 @dataclass(eq=False)
@@ -125,6 +145,7 @@ class _Peer:
     buffered_state: State | None = None
     buffered_parameters: dict[str, ParamValue] = field(default_factory=dict)
     events: int = 0  # transition events received; tells a probe answer from a stale one
+    settled: float = 0.0  # when a call of ours that may change the node last ended (ditto)
     state_heard: float = 0.0  # when the last transition event came
     gone: str = ""  # why it vanished (while absent after having been present)
     participant: bytes | None = None  # the DDS participant (process) hosting it, once known
@@ -134,7 +155,7 @@ class _Peer:
     echoes: dict[str, collections.deque[tuple[ParamValue, float]]] = field(default_factory=dict)
     state_echoes: collections.deque[tuple[State, float]] = field(default_factory=collections.deque)
     sets_in_flight: list[_SetInFlight] = field(default_factory=list)
-    transitions_in_flight: list[list[State]] = field(default_factory=list)  # states seen meanwhile
+    transitions_in_flight: list[_TransitionInFlight] = field(default_factory=list)
     outside: dict[str, int] = field(default_factory=dict)  # changes by others reported, per parameter
     # Round trips of its probes (the first calls after discovery are slow, and say nothing of the
     # link): the estimate behind the liveness window.
@@ -182,9 +203,9 @@ class RosBackend:
     """
 
     def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
-                 acquire_timeout: float = 2.0, probe_interval: float = 0.3, liveness_timeout: float = 0.8,
+                 acquire_timeout: float = 2.0, probe_interval: float = 0.3, liveness_timeout: float = 0.9,
                  plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 1.0,
-                 graph_interval: float = 1.0, watch_node: Node | None = None) -> None:
+                 graph_interval: float = 1.0, escalate_interval: float = 0.05, watch_node: Node | None = None) -> None:
         self._node = node
         # The clients of discovery and liveness (get_state, get_parameters, ...) may live on a node
         # of their own, spun apart: the node of the calls that change nodes then wakes over fewer
@@ -196,6 +217,7 @@ class RosBackend:
         self.acquire_timeout = acquire_timeout
         self.probe_interval = probe_interval
         self.liveness_timeout = liveness_timeout
+        self.escalate_interval = escalate_interval
         self.plain_after = plain_after
         self.poll_interval = poll_interval
         self.idle_poll_interval = idle_poll_interval
@@ -272,10 +294,12 @@ class RosBackend:
             return
         request = ChangeState.Request()
         request.transition = TransitionMsg(id=int(transition), label=transition.label)
-        seen: list[State] = []  # transition events received while the call is in flight
+        step = next((s for s in REQUESTABLE if s.transition is transition), None)
+        in_flight = _TransitionInFlight(step.goal if step is not None else None)
+        seen = in_flight.seen  # transition events received while the call is in flight
         with self._lock:
             events_before = peer.events
-            peer.transitions_in_flight.append(seen)
+            peer.transitions_in_flight.append(in_flight)
 
         def fail(reason: str, refused: bool = False) -> None:
             self._dispatch(lambda: done(CallResult(False, reason, refused)))
@@ -295,7 +319,7 @@ class RosBackend:
 
         def answered(response: Any) -> None:
             with self._lock:
-                _discard(peer.transitions_in_flight, seen)
+                _discard(peer.transitions_in_flight, in_flight)
             if response.success:
                 self._transition_confirmed(peer, transition, seen)
                 self._dispatch(lambda: done(CallResult(True)))
@@ -307,11 +331,13 @@ class RosBackend:
 
         def unanswered(reason: str) -> None:
             with self._lock:
-                _discard(peer.transitions_in_flight, seen)
+                _discard(peer.transitions_in_flight, in_flight)
             fail(reason)
 
-        self._call(peer, peer.change_state, request, f"change_state {transition.label}", self.call_timeout,
-                   answered, unanswered)
+        call = self._call(peer, peer.change_state, request, f"change_state {transition.label}", self.call_timeout,
+                          answered, unanswered)
+        with self._lock:
+            in_flight.call = call
 
     def _transition_confirmed(self, peer: _Peer, transition: Transition, seen: list[State]) -> None:
         """A transition of ours succeeded: the node is in its goal now; report that at once and
@@ -374,8 +400,10 @@ class RosBackend:
                 _discard(peer.sets_in_flight, in_flight)  # if it was applied after all, its event tells
             self._dispatch(lambda: done(CallResult(False, reason)))
 
-        self._call(peer, peer.set_parameters, request, "set_parameters_atomically", self.call_timeout,
-                   answered, failed)
+        call = self._call(peer, peer.set_parameters, request, "set_parameters_atomically", self.call_timeout,
+                          answered, failed)
+        with self._lock:
+            in_flight.call = call
 
     def _confirmed_set(self, peer: _Peer, in_flight: _SetInFlight) -> dict[str, ParamValue]:
         """A set of ours succeeded (lock held): the values to report now (not those someone else
@@ -476,6 +504,8 @@ class RosBackend:
             peer.buffered_state = None
             peer.buffered_parameters = {}
             events_before = peer.events
+            # Back after a slow link's silence: its queries take as long as its answers do.
+            timeout = max(self.acquire_timeout, self._window([peer]))
 
         def failed(reason: str) -> None:
             with self._lock:
@@ -510,16 +540,16 @@ class RosBackend:
             declared = set(response.result.names)
             names = [name for name in peer.parameter_names if name in declared]
             request = GetParameters.Request(names=names)
-            self._call(peer, peer.get_parameters, request, "get_parameters", self.acquire_timeout,
+            self._call(peer, peer.get_parameters, request, "get_parameters", timeout,
                        lambda answer: got_parameters(state, names, answer), failed, busy=False)
 
         def ask_parameters(state: State) -> None:
             request = ListParameters.Request(prefixes=[], depth=ListParameters.Request.DEPTH_RECURSIVE)
-            self._call(peer, peer.list_parameters, request, "list_parameters", self.acquire_timeout,
+            self._call(peer, peer.list_parameters, request, "list_parameters", timeout,
                        lambda response: ask_values(state, response), failed, busy=False)
 
         if lifecycle:
-            self._call(peer, peer.get_state, GetState.Request(), "get_state", self.acquire_timeout,
+            self._call(peer, peer.get_state, GetState.Request(), "get_state", timeout,
                        lambda response: ask_parameters(_state_of(response.current_state.id)), failed, busy=False)
         else:
             ask_parameters(State.ACTIVE)
@@ -528,10 +558,12 @@ class RosBackend:
         with self._lock:
             peer.last_probe = now
             events_before = peer.events
+            sent = self._clock.now()
             # Unanswered by the end of the window (from the last word of its process): the verdict.
             members = self._members(peer)
             heard = max(m.last_heard for m in members)
             timeout = max(heard + self._window(members) - now, self.probe_interval)
+            late = max(self.escalate_interval, 2 * peer.srtt) if peer.srtt is not None else self.escalate_interval
 
         def answered(response: Any) -> None:
             self._clock.call_later(self.probe_interval, lambda: self._probe_if_due(peer))
@@ -542,12 +574,12 @@ class RosBackend:
                 state = _state_of(response.current_state.id)
                 # Only a probe that no transition event overtook, with no call of ours in flight,
                 # may correct the state (a missed event); anything else may be stale.
-                stale = peer.events != events_before or peer.busy or state is peer.state
+                stale = peer.events != events_before or peer.busy or peer.settled >= sent or state is peer.state
                 if not stale:
                     peer.state = state
                 listener = self._listener
             if not stale and listener is not None:
-                log.warning("node %s is %s (a transition event was missed)", peer.fqn, state.label)
+                log.warning("node %s is %s (its transition event was missed, or is late)", peer.fqn, state.label)
                 self._dispatch(lambda: listener.node_state(peer.part, state))
 
         def unanswered(reason: str) -> None:
@@ -555,15 +587,57 @@ class RosBackend:
                 peer.probe = None
             self._silence_verdict(peer)
 
+        overdue = (late, lambda call: self._escalate(peer, call))
         if peer.lifecycle:
             call = self._call(peer, peer.get_state, GetState.Request(), "get_state (liveness)",
-                              timeout, answered, unanswered, busy=False, probe=True)
+                              timeout, answered, unanswered, busy=False, probe=True, late=overdue)
         else:
             call = self._call(peer, peer.get_parameters, GetParameters.Request(names=[]), "get_parameters (liveness)",
-                              timeout, answered, unanswered, busy=False, probe=True)
+                              timeout, answered, unanswered, busy=False, probe=True, late=overdue)
         with self._lock:
             if not call.finished:
                 peer.probe = call
+
+    def _escalate(self, peer: _Peer, probe: _Call, count: int = 1) -> None:
+        """``probe`` is late: while it is, every ``escalate_interval`` s with no word from the process,
+        ``count`` more probes (doubling each time) on paths of their own (see the module's doc),
+        until every path has one. A link that just turned bad gets an answer through within the
+        window; a cut costs a burst of small requests."""
+        now = self._clock.now()
+        with self._lock:
+            if probe.finished or peer.presence is not _Presence.PRESENT or self._listener is None:
+                return
+            members = self._members(peer)
+            if any(member.busy for member in members):
+                return  # a change of ours in flight: its answers and events are the words to wait for
+            heard = max(m.last_heard for m in members)
+            deadline = heard + self._window(members)
+            quiet = now - heard >= self.escalate_interval - _SLACK
+            paths = self._free_paths(members)[:count] if quiet else []
+        for member, client, request in paths:
+            self._call(member, client, request, f"{client.srv_name} (liveness)",
+                       max(deadline - now, self.escalate_interval), lambda response: None,
+                       lambda reason: self._silence_verdict(peer), busy=False, probe=True)
+        if deadline - now > self.escalate_interval:
+            self._clock.call_later(self.escalate_interval,
+                                   lambda: self._escalate(peer, probe, 2 * count if quiet else count))
+
+    @staticmethod
+    def _free_paths(members: list[_Peer]) -> list[tuple[_Peer, Any, Any]]:
+        """The query services of a process with no call of ours on them (lock held): the nodes' state
+        services first, then their other services."""
+        paths: list[tuple[_Peer, Any, Any]] = []
+        for member in members:
+            if member.lifecycle:
+                paths.append((member, member.get_state, GetState.Request()))
+        for member in members:
+            paths.append((member, member.get_parameters, GetParameters.Request(names=[])))
+            if member.lifecycle:
+                paths.append((member, member.get_transitions, GetAvailableTransitions.Request()))
+            paths.append((member, member.list_parameters,
+                          ListParameters.Request(prefixes=[_NO_SUCH_PREFIX], depth=1)))
+        return [(member, client, request) for member, client, request in paths
+                if not any(call.client is client and not call.finished for call in member.calls)]
 
     def _probe_if_due(self, peer: _Peer) -> None:
         """The next probe of a chain: one ``probe_interval`` after the last answer."""
@@ -629,17 +703,23 @@ class RosBackend:
             now = peer.last_heard = peer.state_heard = self._clock.now()
             if _echo(peer.state_echoes, state, now):
                 return  # a transition of ours, already reported from its answer
-            for seen in peer.transitions_in_flight:
-                seen.append(state)
+            for in_flight in peer.transitions_in_flight:
+                in_flight.seen.append(state)
+            # Our transition reached its goal: the event tells as well as the answer would (over a
+            # lossy link, whichever of the two paths comes first).
+            reached = [t.call for t in peer.transitions_in_flight
+                       if t.goal is state and t.call is not None and not t.call.finished]
             if peer.presence is _Presence.ACQUIRING:
                 peer.buffered_state = state
                 return
-            if peer.presence is not _Presence.PRESENT or state is peer.state:
-                return
-            peer.state = state
+            report = peer.presence is _Presence.PRESENT and state is not peer.state
+            if report:
+                peer.state = state
             listener = self._listener
-        if listener is not None:
+        if report and listener is not None:
             self._dispatch(lambda: listener.node_state(peer.part, state))
+        for call in reached:
+            self._finish(call, response=ChangeState.Response(success=True))
 
     def _on_parameter_event(self, message: ParameterEvent) -> None:
         peer = self._by_fqn.get(message.node)
@@ -653,6 +733,12 @@ class RosBackend:
         with self._lock:
             now = peer.last_heard = self._clock.now()
             changed = self._not_ours(peer, changed, now)
+            # A set of ours whose every value came back applied: the node took it (sets are atomic).
+            applied = [s.call for s in peer.sets_in_flight
+                       if s.call is not None and not s.call.finished and s.echoed >= s.values.keys()]
+        for call in applied:
+            self._finish(call, response=_APPLIED)
+        with self._lock:
             if not changed:
                 return
             if peer.presence is _Presence.ACQUIRING:
@@ -682,13 +768,27 @@ class RosBackend:
 
     def _call(self, peer: _Peer, client: Any, request: Any, label: str, timeout: float,
               on_result: Callable[[Any], None], on_failure: Callable[[str], None], *, busy: bool = True,
-              probe: bool = False) -> _Call:
+              probe: bool = False, late: tuple[float, Callable[[_Call], None]] | None = None) -> _Call:
+        """Send ``request``; ``late=(after, on_late)``: ``on_late(call)`` if unanswered ``after`` s
+        (the timer of the timeout serves both: nothing more to arm for a call answered in time)."""
         call = _Call(peer, label, client, on_result=on_result, on_failure=on_failure, busy=busy,
                      sent=self._clock.now(), probe=probe)
         with self._lock:
             peer.calls.add(call)
-        call.timer = self._clock.call_later(
-            timeout, lambda: self._finish(call, failure=f"{label} on {peer.part}: no answer within {timeout:g} s"))
+
+        def expire() -> None:
+            self._finish(call, failure=f"{label} on {peer.part}: no answer within {timeout:g} s")
+
+        if late is not None and late[0] < timeout:
+            after, on_late = late
+
+            def overdue() -> None:
+                call.timer = self._clock.call_later(timeout - after, expire)
+                if not call.finished:
+                    on_late(call)
+            call.timer = self._clock.call_later(after, overdue)
+        else:
+            call.timer = self._clock.call_later(timeout, expire)
         future = client.call_async(request)
         call.future = future
         future.add_done_callback(lambda done: self._answered(call, done))
@@ -713,17 +813,20 @@ class RosBackend:
                 return
             call.finished = True
             call.peer.calls.discard(call)
+            if call.busy:  # its outcome is reported next (outside the lock): a probe answered meanwhile is stale
+                call.peer.settled = self._clock.now()
             retired = call.client in call.peer.retired and not any(
                 other.client is call.client for other in call.peer.calls)
             if retired:
                 call.peer.retired.remove(call.client)
         if call.timer is not None:
             call.timer.cancel()
-        if failure is not None and call.future is not None and not call.future.done():
+        if call.future is not None and not call.future.done():  # its answer, if it comes, is dropped
             call.client.remove_pending_request(call.future)
-            call.future.cancel()
-            if call.busy and self._listener is not None:
-                self._renew_client(call)
+            if failure is not None:  # (cancelling runs its callbacks in the executor: not for a success)
+                call.future.cancel()
+                if call.busy and self._listener is not None:
+                    self._renew_client(call)
         if retired:  # replaced earlier; this was the last call of ours on it
             self._node.destroy_client(call.client)
         if failure is not None:
@@ -837,6 +940,10 @@ class _Outbox:
 
 
 _SLACK = 1e-3  # timers fire a little early or late
+#: What a parameter set whose event came first is taken to have answered.
+_APPLIED = SetParametersAtomically.Response(result=SetParametersResult(successful=True))
+#: list_parameters asked with this prefix answers with nothing: a liveness probe, not a query.
+_NO_SUCH_PREFIX = "sm_bt.liveness.none"
 #: The liveness window is this many estimated round trips (``srtt + 4 rttvar``) where that is
 #: more than ``liveness_timeout``; never more than MAX_WINDOW.
 ADAPT = 2.0

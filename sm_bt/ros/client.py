@@ -34,6 +34,10 @@ TRANSITION_GOALS = {"configure": "inactive", "activate": "active", "deactivate":
 DISCOVERY_GRACE = 2.0
 #: How often a wait asks get_mode/get_state when no event wakes it (events wake it at once).
 POLL = 0.5
+#: The services a node serves itself (a system's are its manager's).
+NODE_SERVICES = frozenset({"get_state", "change_state"})
+#: How long to look for the manager of a node that does not answer, to say which of the two is out of reach.
+PEEK = 2.0
 
 
 class ManagerUnreachable(RuntimeError):
@@ -116,14 +120,35 @@ class ModeClient:
         client = self._client(service_type, name)
         if not self._found(client, part):
             raise ManagerUnreachable(
-                f"nothing answers {name} within {self.timeout:g} s: is a mode manager (`sm-bt manager MODEL`) "
-                "running, with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?")
+                f"nothing answers {name} within {self.timeout:g} s: " + self._what_to_check(part, service))
         future = client.call_async(request)
         self.executor.spin_until_future_complete(future, timeout_sec=self.timeout)
         if not future.done():
             client.remove_pending_request(future)
-            raise ManagerUnreachable(f"{name} did not answer within {self.timeout:g} s")
+            raise ManagerUnreachable(f"{name} did not answer within {self.timeout:g} s: "
+                                     + self._what_to_check(part, service))
         return future.result()
+
+    def _what_to_check(self, part: str, service: str) -> str:
+        if service in NODE_SERVICES and self._manager_answers(part):
+            # Its manager answers but its lifecycle services do not: they are a node's own.
+            return (f"{part} is a node, and its mode manager answers but the node does not: it is not running, or "
+                    f"the network to it is down (`sm-bt mode get {part}` shows what the manager knows)")
+        return ("is a mode manager (`sm-bt manager MODEL`) running, with the same ROS_DOMAIN_ID and "
+                "ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?")
+
+    def _manager_answers(self, part: str) -> bool:
+        """Does a manager answer ``get_mode`` of ``part`` within ``PEEK`` s?"""
+        from system_modes_msgs.srv import GetMode
+
+        client = self._client(GetMode, f"/{part}/get_mode")
+        if not client.wait_for_service(timeout_sec=PEEK):
+            return False
+        future = client.call_async(GetMode.Request())
+        self.executor.spin_until_future_complete(future, timeout_sec=PEEK)
+        if not future.done():
+            client.remove_pending_request(future)
+        return bool(future.done())
 
     # -- modes -----------------------------------------------------------------------------------------
 
@@ -157,7 +182,8 @@ class ModeClient:
         from system_modes_msgs.msg import ModeEvent
 
         return self._wait(ModeEvent, f"/{part}/mode_event", lambda: self.get_mode(part) == mode, since,
-                          lambda: f"{part} is in mode {self.get_mode(part) or '(none)'!r}, not {mode!r}")
+                          lambda: f"{part} is in mode {self.get_mode(part) or '(none)'!r}, not {mode!r}",
+                          lambda event: bool(event.goal_mode.label == mode))
 
     # -- lifecycle states ------------------------------------------------------------------------------
 
@@ -182,22 +208,31 @@ class ModeClient:
 
         goal = TRANSITION_GOALS[transition]
         return self._wait(TransitionEvent, f"/{part}/transition_event", lambda: self.get_state(part) == goal, since,
-                          lambda: f"{part} is {self.get_state(part)}, not {goal}")
+                          lambda: f"{part} is {self.get_state(part)}, not {goal}",
+                          lambda event: bool(event.goal_state.label == goal))
 
     # -- waiting ---------------------------------------------------------------------------------------
 
     def _wait(self, message_type: Any, topic: str, reached: Callable[[], bool], since: float,
-              where: Callable[[], str]) -> float:
+              where: Callable[[], str], tells: Callable[[Any], bool]) -> float:
+        """Seconds from ``since`` until the part is there: an event that ``tells`` so (timed when it
+        arrived), or ``reached()`` asked now and then (and after any other event)."""
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-        woken: list[Any] = []
-        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        subscription = self.node.create_subscription(message_type, topic, woken.append, qos)
+        woken: list[tuple[float, Any]] = []
+        # Volatile: matches a node's volatile transition_event and the manager's latched topics alike
+        # (only what comes now: the first ask below covers what was there before).
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+        subscription = self.node.create_subscription(
+            message_type, topic, lambda event: woken.append((time.monotonic(), event)), qos)
         try:
             deadline = since + self.timeout
             next_poll = 0.0
             while True:
                 now = time.monotonic()
+                told = next((at for at, event in woken if tells(event)), None)
+                if told is not None:
+                    return told - since
                 if woken or now >= next_poll:
                     woken.clear()
                     next_poll = now + POLL

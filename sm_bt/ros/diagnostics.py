@@ -13,11 +13,14 @@ One ``DiagnosticStatus`` per part of the model, named ``"{manager node}: {part}"
 
 ``values`` carry ``target``, ``actual``, ``divergence``, the last request (``last_request``,
 ``last_request_outcome``: running/succeeded/failed/refused, ``last_request_reason``,
-``last_request_by``) and for nodes ``reachable``, ``round_trip_ms`` and ``liveness_window_s``.
+``last_request_by``) and for nodes ``reachable``, ``last_return`` (how it came back the last time
+it was out of reach: ``unconfigured (back after 4.2 s; was active.f_normal)``), ``round_trip_ms`` and
+``liveness_window_s``.
 
 A part's status goes out within ``GATHER`` (0.1 s) of a change (the changed parts only, one message
-per burst: aggregators keep the last status per name), and every part's every ``period`` seconds, as
-``diagnostic_updater`` does, so that a late joiner and the aggregators' staleness checks see it.
+per burst: aggregators keep the last status per name; a request's end at once), and every part's
+every ``period`` seconds, as ``diagnostic_updater`` does, so that a late joiner and the aggregators'
+staleness checks see it.
 """
 
 from __future__ import annotations
@@ -89,6 +92,8 @@ def part_status(manager: ModeManager, part: str, last: Request | None, link: Any
     ]
     if observation is not None:
         values.append(("reachable", "true" if observation.reachable else "false"))
+        back = manager.last_return(part)
+        values.append(("last_return", back.describe() if back is not None else ""))
         if link is not None:
             values.append(("round_trip_ms", f"{link.rtt * 1000:.1f}" if link.rtt is not None else ""))
             values.append(("liveness_window_s", f"{link.window:.2f}"))
@@ -171,15 +176,19 @@ class DiagnosticsPublisher:
     def _note(self, part: str, request: Request) -> None:
         with self._lock:
             self._last[part] = request
-        self._changed(part)
+        # A request's end is news at once (its burst of events is over); its start can wait.
+        self._changed(part, now=request.done)
 
-    def _changed(self, part: str) -> None:
+    def _changed(self, part: str, now: bool = False) -> None:
         with self._lock:
             if self._closed or part not in self._manager.model.parts:
                 return
             self._dirty.add(part)
+            if now and self._flush is not None:
+                self._flush.cancel()
+                self._flush = None
             if self._flush is None:  # one publication for a burst of events
-                self._flush = self._clock.call_later(GATHER, self._publish_dirty)
+                self._flush = self._clock.call_later(0.0 if now else GATHER, self._publish_dirty)
 
     # -- publishing (clock thread) ---------------------------------------------------------------------
 
