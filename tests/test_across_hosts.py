@@ -158,6 +158,8 @@ def test_a_lossy_link_is_slow_not_gone_and_changes_complete(two_hosts: Hosts) ->
                                       timeout=5.0)
     amcl = status(message, "amcl")
     assert amcl is not None and values(amcl)["reachable"] == "true" and float(values(amcl)["liveness_window_s"]) > 1
+    print(f"MEASURED lossy link: amcl round trip {values(amcl)['round_trip_ms']} ms, liveness window "
+          f"{values(amcl)['liveness_window_s']} s")
 
 
 def test_nodes_restarted_behind_a_cut_come_back_said_so_and_are_restored(two_hosts: Hosts) -> None:
