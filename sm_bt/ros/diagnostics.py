@@ -18,7 +18,7 @@ it was out of reach: ``unconfigured (back after 4.2 s; was active.f_normal)``), 
 ``liveness_window_s``.
 
 A part's status goes out within ``GATHER`` (0.1 s) of a change (the changed parts only, one message
-per burst: aggregators keep the last status per name; a request's end at once), and every part's
+per burst: aggregators keep the last status per name; a request's failure at once), and every part's
 every ``period`` seconds, as ``diagnostic_updater`` does, so that a late joiner and the aggregators'
 staleness checks see it.
 """
@@ -176,8 +176,9 @@ class DiagnosticsPublisher:
     def _note(self, part: str, request: Request) -> None:
         with self._lock:
             self._last[part] = request
-        # A request's end is news at once (its burst of events is over); its start can wait.
-        self._changed(part, now=request.done)
+        # A failure is news at once; a start or a success can wait for the burst around it (a caller
+        # may start the next change right away: publishing then would hold its answers back).
+        self._changed(part, now=request.done and not request.succeeded)
 
     def _changed(self, part: str, now: bool = False) -> None:
         with self._lock:
