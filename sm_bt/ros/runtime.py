@@ -31,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
+import sys
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -47,6 +48,8 @@ log = logging.getLogger("sm_bt.ros.runtime")
 
 #: The reference manager's node name.
 MANAGER_NODE_NAME = "__mode_manager"
+#: The GIL switch interval while a runtime runs (see RosRuntime).
+SWITCH_INTERVAL = 0.0005
 
 
 def _quietly(action: Callable[[], object], what: str) -> None:
@@ -66,11 +69,19 @@ class RosRuntime:
     behaviours alone). ``own_domain`` is for self-contained runs (demo, tests): a per-run
     ``ROS_DOMAIN_ID`` and discovery on this machine unless set; otherwise the user's settings (and
     ROS's defaults) apply, so nodes and manager may run on different machines.
+
+    ``switch_interval``: while it runs, the interpreter's GIL switch interval (``sys.setswitchinterval``),
+    put back by :meth:`close`. Each answer and event crosses threads here (an executor's, then the
+    clock's); at Python's default (5 ms) a thread that is computing holds the next one back for up
+    to that long (the tail of a system event's delay: README, "Performance"). ``None`` leaves the
+    interpreter's setting alone.
     """
 
     def __init__(self, model: Model, *, node_name: str = MANAGER_NODE_NAME, serve: bool = True,
                  own_domain: bool = False, manager_options: Mapping[str, Any] | None = None,
-                 backend_options: Mapping[str, Any] | None = None, node: Any = None) -> None:
+                 backend_options: Mapping[str, Any] | None = None, node: Any = None,
+                 switch_interval: float | None = SWITCH_INTERVAL) -> None:
+        self._switch_interval: tuple[float, float] | None = None
         if node is None:
             prepare(own_domain=own_domain, local_only=own_domain)
         require_ros()
@@ -127,6 +138,9 @@ class RosRuntime:
                                                 link=self.backend.link) if serve else None
         self.server = ModeManagerServer(self.node, self.manager,
                                         self.diagnostics.requested if self.diagnostics else None) if serve else None
+        if switch_interval is not None:
+            self._switch_interval = (sys.getswitchinterval(), switch_interval)
+            sys.setswitchinterval(switch_interval)
         self._closed = False
 
     def set_parameters(self, node: str, values: Mapping[str, ParamValue], timeout: float = 10.0) -> CallResult:
@@ -201,6 +215,10 @@ class RosRuntime:
             _quietly(node.destroy_node, f"destroying {node.get_name()}")
         if self._owns_node:
             self.context.try_shutdown()
+        if self._switch_interval is not None:
+            before, ours = self._switch_interval
+            if abs(sys.getswitchinterval() - ours) < 1e-7:  # unless someone has set it since
+                sys.setswitchinterval(before)
 
     def __enter__(self) -> RosRuntime:
         return self
