@@ -32,7 +32,11 @@ def test_mode_and_state_commands_drive_the_pilot_and_confirm_each_change(
     manager = start_manager("--grace-period", "0.3")
     node_processes("pilot")
     manager.ready()
-    assert sm_bt(capsys, "state", "get", "pilot")[1] == "pilot: unconfigured\n"
+    # Serving comes first; the pilot is unknown until the manager has asked every node where it is.
+    deadline = time.monotonic() + 15.0
+    while (state := sm_bt(capsys, "state", "get", "pilot")[1]) == "pilot: unknown\n" and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert state == "pilot: unconfigured\n"
     assert sm_bt(capsys, "mode", "get", "pilot")[1] == "pilot: (no mode: not active)\n"
 
     code, out, err = sm_bt(capsys, "state", "set", "pilot", "configure", "--wait")
