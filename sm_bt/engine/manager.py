@@ -122,7 +122,7 @@ class ModeManager:
         self._confirming: dict[str, set[Execution]] = {}  # part -> executions waiting for its actual
         self._last_mode: dict[str, str] = {}  # the last active mode asked for, kept over deactivation
         self._reported: set[str] = set()  # divergences already logged as errors
-        self._away: dict[str, tuple[float, Actual]] = {}  # vanished nodes: since when, and as they were
+        self._away: dict[str, tuple[float, StateMode]] = {}  # vanished nodes: since when, and as they were
         self._returns: dict[str, Return] = {}  # the last time each node came back
         self._agenda: deque[Callable[[], None]] = deque()
         self._outbox = Outbox()
@@ -318,7 +318,7 @@ class ModeManager:
             if away is not None:  # what changed while it was out of reach (recovery logs what it does)
                 since, before = away
                 after = self._inference.actual(node).state_mode
-                back = Return(node, self.clock.now() - since, before.state_mode, after)
+                back = Return(node, self.clock.now() - since, before, after)
                 self._returns[node] = back
                 log.info("node %s appeared: %s", node, back.describe())
             self._drivers[node].advance()
@@ -338,7 +338,7 @@ class ModeManager:
     def _node_vanished(self, node: str, reason: str) -> None:
         with self._entry():
             log.warning("node %s vanished: %s", node, reason)
-            self._away.setdefault(node, (self.clock.now(), self._inference.actual(node)))
+            self._away.setdefault(node, (self.clock.now(), self._inference.actual(node).state_mode))
             self._apply(self._inference.node_vanished(node, reason))
             # A request that needs it cannot complete while it is out of reach: it ends now, not
             # when one of its calls times out (a node that waits for its turn has none in flight).
@@ -740,7 +740,6 @@ class _Listener:
 
     def node_vanished(self, node: str, reason: str) -> None:
         self._manager._node_vanished(node, reason)
-
 
 
 @dataclass(frozen=True)

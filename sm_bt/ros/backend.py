@@ -558,7 +558,6 @@ class RosBackend:
         with self._lock:
             peer.last_probe = now
             events_before = peer.events
-            sent = self._clock.now()
             # Unanswered by the end of the window (from the last word of its process): the verdict.
             members = self._members(peer)
             heard = max(m.last_heard for m in members)
@@ -574,7 +573,7 @@ class RosBackend:
                 state = _state_of(response.current_state.id)
                 # Only a probe that no transition event overtook, with no call of ours in flight,
                 # may correct the state (a missed event); anything else may be stale.
-                stale = peer.events != events_before or peer.busy or peer.settled >= sent or state is peer.state
+                stale = peer.events != events_before or peer.busy or peer.settled >= now or state is peer.state
                 if not stale:
                     peer.state = state
                 listener = self._listener
@@ -736,15 +735,11 @@ class RosBackend:
             # A set of ours whose every value came back applied: the node took it (sets are atomic).
             applied = [s.call for s in peer.sets_in_flight
                        if s.call is not None and not s.call.finished and s.echoed >= s.values.keys()]
+            if changed and peer.presence is _Presence.ACQUIRING:
+                peer.buffered_parameters.update(changed)
+            listener = self._listener if changed and peer.presence is _Presence.PRESENT else None
         for call in applied:
             self._finish(call, response=_APPLIED)
-        with self._lock:
-            if not changed:
-                return
-            if peer.presence is _Presence.ACQUIRING:
-                peer.buffered_parameters.update(changed)
-                return
-            listener = self._listener if peer.presence is _Presence.PRESENT else None
         if listener is not None:
             self._dispatch(lambda: listener.node_parameters(peer.part, changed))
 
