@@ -17,6 +17,7 @@ from sm_bt.ros.diagnostics import ERROR
 
 #: The manager's liveness window on a good link (RosBackend's default): detection within a second.
 DETECTION = 1.0
+LIVENESS = 0.9
 #: The manager's own reason for a node it cannot reach.
 UNREACHABLE = re.compile(r"node (\w+) vanished: no answer from /\1 for (?:0\.9|1\.0) s \(node exited, or network "
                          r"unreachable\)")
@@ -154,10 +155,20 @@ def test_a_lossy_link_is_slow_not_gone_and_changes_complete(two_hosts: Hosts) ->
     assert took[0] <= LOSSY_CHANGE, took
     assert not manager.lines("vanished"), manager.lines("vanished")
     assert hosts.relay_stats()["dropped"] > 0
-    _, message = diagnostics.wait_for(lambda m: "slow link" in (status(m, "amcl") or {}).get("message", ""),
-                                      timeout=5.0)
+    # The manager's view names the link as it is: slow (not gone), with the round trip it measures
+    # (at least the relay's 2 x DELAY; its estimate converges as probes go on) behind a wider window.
+    floor = 2 * DELAY * 1000
+
+    def link_seen(message: Any) -> bool:
+        amcl = status(message, "amcl") or {}
+        seen = values(amcl) if amcl else {}
+        return ("slow link" in amcl.get("message", "") and seen.get("reachable") == "true"
+                and float(seen.get("round_trip_ms") or 0) >= floor
+                and float(seen.get("liveness_window_s") or 0) > LIVENESS)
+
+    _, message = diagnostics.wait_for(link_seen, timeout=10.0)
     amcl = status(message, "amcl")
-    assert amcl is not None and values(amcl)["reachable"] == "true" and float(values(amcl)["liveness_window_s"]) > 1
+    assert amcl is not None
     print(f"MEASURED lossy link: amcl round trip {values(amcl)['round_trip_ms']} ms, liveness window "
           f"{values(amcl)['liveness_window_s']} s")
 

@@ -73,6 +73,7 @@ from sm_bt.engine.clock import Clock, TimerHandle, WallClock
 from sm_bt.engine.lifecycle import REQUESTABLE, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
+from sm_bt.ros import removable
 from sm_bt.ros.parameters import from_parameter_value, from_parameters, to_parameters
 
 log = logging.getLogger("sm_bt.ros.backend")
@@ -241,12 +242,15 @@ class RosBackend:
         with self._lock:
             members = self._members(peer)
             window = self._window(members)
-            rtt = next((m.srtt for m in members if m.srtt is not None), None)  # the probed one's
-            return Link(rtt, window, window > self.liveness_timeout + _SLACK)
+            # The round trip behind the window: a member probed only now and then (a backup probe)
+            # still has the estimate of the link as it was.
+            timed = [m for m in members if m.srtt is not None]
+            slowest = max(timed, key=_estimate, default=None)
+            return Link(slowest.srtt if slowest is not None else None, window, window > self.liveness_timeout + _SLACK)
 
     def _window(self, members: list[_Peer]) -> float:
         """The liveness window of a process, from the round trips of its probes (lock held)."""
-        estimates = [ADAPT * (m.srtt + 4 * m.rttvar) for m in members if m.srtt is not None]
+        estimates = [ADAPT * _estimate(m) for m in members if m.srtt is not None]
         return min(max([self.liveness_timeout, *estimates]), MAX_WINDOW)
 
     # -- Backend protocol ---------------------------------------------------------------------------
@@ -259,8 +263,8 @@ class RosBackend:
             for name in nodes:
                 self._peers[name] = self._make_peer(name)
                 self._by_fqn[self._peers[name].fqn] = self._peers[name]
-            self._subscriptions.append(self._node.create_subscription(
-                ParameterEvent, "/parameter_events", self._on_parameter_event, qos_profile_parameter_events))
+            self._subscriptions.append(removable.subscription(self._node, ParameterEvent, "/parameter_events",
+                                                              self._on_parameter_event, qos_profile_parameter_events))
         self._poll_timer = self._clock.call_later(0.0, self._poll)
 
     def detach(self) -> None:
@@ -867,8 +871,8 @@ class RosBackend:
             list_parameters=watch.create_client(ListParameters, f"{fqn}/list_parameters"),
             get_transitions=watch.create_client(GetAvailableTransitions, f"{fqn}/get_available_transitions"),
         )
-        self._subscriptions.append(node.create_subscription(
-            TransitionEvent, f"{fqn}/transition_event", lambda message: self._on_transition_event(peer, message),
+        self._subscriptions.append(removable.subscription(
+            node, TransitionEvent, f"{fqn}/transition_event", lambda message: self._on_transition_event(peer, message),
             QoSProfile(depth=10)))
         return peer
 
@@ -946,6 +950,12 @@ MAX_WINDOW = 10.0
 
 #: How long an echo of our own change is waited for; after that, an equal value is news again.
 ECHO_WINDOW = 5.0
+
+
+def _estimate(peer: _Peer) -> float:
+    """The longest round trip to expect from ``peer`` (``srtt + 4 rttvar``; it has a sample)."""
+    assert peer.srtt is not None
+    return peer.srtt + 4 * peer.rttvar
 
 
 def _same(a: object, b: object) -> bool:

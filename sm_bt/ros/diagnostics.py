@@ -36,6 +36,7 @@ from sm_bt.engine.events import Event, EventKind, Subscription
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.types import NodePart
+from sm_bt.ros import removable
 
 log = logging.getLogger("sm_bt.ros.diagnostics")
 
@@ -140,7 +141,7 @@ class DiagnosticsPublisher:
         self._period = period
         self._link = link
         self._name = node.get_name()
-        self._publisher = node.create_publisher(DiagnosticArray, topic, 10)
+        self._publisher = removable.publisher(node, DiagnosticArray, topic, 10)
         self._lock = threading.Lock()
         self._last: dict[str, Request] = {}
         self._dirty: set[str] = set()

@@ -58,6 +58,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, SystemPart
+from sm_bt.ros import removable
 
 log = logging.getLogger("sm_bt.ros.manager_node")
 
@@ -121,7 +122,7 @@ class ModeManagerServer:
             self._services.append(node.create_service(kind, f"{base}/{name}", callback))
 
         def publisher(kind: Any, name: str) -> Any:
-            created = node.create_publisher(kind, f"{base}/{name}", LATCHED)
+            created = removable.publisher(node, kind, f"{base}/{name}", LATCHED)
             self._publishers.append(created)
             return created
 

@@ -22,8 +22,8 @@ context shut down has nothing left to remove and does not raise.
 Apart, each executor wakes over its own entities only: rclpy's executor rebuilds its wait set
 over every entity of its nodes for every message it handles (with 20 managed nodes, 1.9 ms for
 all of them together, 0.8 ms for the backend's), and the backend handles one per answer and
-event. ``close()`` stops in the order rclpy needs: executors
-first, then the manager and backend, then the nodes and context.
+event. ``close()`` stops in the order rclpy needs: the interface's executor, then the interface,
+the manager and backend, the other executors, the nodes and context.
 """
 
 from __future__ import annotations
@@ -122,14 +122,7 @@ class RosRuntime:
         self._executors = (self.executor, self.backend_executor, self.watch_executor)
         spun = [(self.executor, self.node, "executor")] if self._owns_node else []
         spun += [(self.backend_executor, self.backend_node, "backend"), (self.watch_executor, self.watch_node, "watch")]
-        self._stopping = threading.Event()
-        # One guard condition per spinning executor: triggered by close(), its (empty) callback
-        # makes spin_once() return, so that the thread sees _stopping.
-        self._wakers = [(node, node.create_guard_condition(lambda: None)) for _, node, _ in spun]
-        self._threads = [threading.Thread(target=self._spin, args=(executor,), name=f"sm_bt-ros-{name}", daemon=True)
-                         for executor, _, name in spun]
-        for thread in self._threads:
-            thread.start()
+        self._spinners = [_Spinner(executor, node, name, self.context) for executor, node, name in spun]
         self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node,
                                   **dict(backend_options or {}))
         self.manager = ModeManager(model, self.backend, **dict(manager_options or {}))
@@ -159,16 +152,6 @@ class RosRuntime:
             return CallResult(False, f"set_parameters on {node}: no answer within {timeout:g} s")
         return results[0]
 
-    def _spin(self, executor: Any) -> None:
-        from rclpy.executors import ExternalShutdownException
-
-        # spin() itself cannot be stopped safely: Executor.shutdown() under a spinning thread drops
-        # its guard condition while callbacks may still schedule work (an AttributeError in this
-        # thread). close() sets _stopping and wakes the executor; the loop ends between callbacks.
-        with contextlib.suppress(ExternalShutdownException):  # the context shut down under us
-            while not self._stopping.is_set() and self.context.ok():
-                executor.spin_once()
-
     def wait_for_nodes(self, timeout: float = 10.0, nodes: Sequence[str] | None = None) -> None:
         """Block until the manager reaches every node of the model (or ``nodes``): found on the
         ROS graph, answering, state and parameters known. ``TimeoutError`` after ``timeout``
@@ -193,21 +176,24 @@ class RosRuntime:
         if self._closed:
             return
         self._closed = True
-        # First the work (no new calls; those in flight cancelled while their callbacks still have
-        # an executor), then the spinning, then the executors, nodes and context.
+        # The interface's executor stops before its services and publishers go: rclpy does not
+        # guard an entity destroyed while an executor thread builds its wait set over it (an
+        # InvalidHandle in that thread). An application's node is the application's to stop.
+        interface = [spinner for spinner in self._spinners if spinner.node is self.node]
+        for spinner in interface:
+            spinner.stop()
+        # Then the work (no new calls; those in flight cancelled while their callbacks still have
+        # an executor), then the other spinning, then the executors, nodes and context.
         if self.server is not None:  # the application may have destroyed its node first
             _quietly(self.server.close, "removing the interface")
         if self.diagnostics is not None:
             _quietly(self.diagnostics.close, "removing the diagnostics")
         self.manager.close()
         self.clock.close()
-        self._stopping.set()
-        for _, waker in self._wakers:
-            _quietly(waker.trigger, "waking the executor")
-        for thread in self._threads:
-            thread.join(3.0)
-        for node, waker in self._wakers:
-            _quietly(functools.partial(node.destroy_guard_condition, waker), "removing the waker")
+        for spinner in self._spinners:
+            spinner.stop()
+        for spinner in self._spinners:
+            spinner.remove_waker()
         for executor in self._executors:  # a context shut down first has stopped them already
             _quietly(functools.partial(executor.shutdown, timeout_sec=2.0), "executor shutdown")
         helpers = [self.backend_node, self.watch_node] + ([self.node] if self._owns_node else [])
@@ -226,3 +212,39 @@ class RosRuntime:
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  traceback: TracebackType | None) -> None:
         self.close()
+
+
+class _Spinner:
+    """One executor's thread, stoppable between callbacks.
+
+    ``spin()`` itself cannot be stopped safely: ``Executor.shutdown()`` under a spinning thread drops
+    its guard condition while callbacks may still schedule work (an AttributeError in that thread).
+    :meth:`stop` sets a flag and triggers a guard condition whose empty callback makes
+    ``spin_once()`` return, so that the thread sees the flag.
+    """
+
+    def __init__(self, executor: Any, node: Any, name: str, context: Any) -> None:
+        self.executor = executor
+        self.node = node
+        self._context = context
+        self._stopping = threading.Event()
+        self._waker = node.create_guard_condition(lambda: None)
+        self._thread = threading.Thread(target=self._spin, name=f"sm_bt-ros-{name}", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        with contextlib.suppress(ExternalShutdownException):  # the context shut down under us
+            while not self._stopping.is_set() and self._context.ok():
+                self.executor.spin_once()
+
+    def stop(self, timeout: float = 3.0) -> None:
+        """Return once the thread has left ``spin_once`` (or after ``timeout``); idempotent."""
+        if not self._stopping.is_set():
+            self._stopping.set()
+            _quietly(self._waker.trigger, "waking the executor")
+        self._thread.join(timeout)
+
+    def remove_waker(self) -> None:
+        _quietly(functools.partial(self.node.destroy_guard_condition, self._waker), "removing the waker")

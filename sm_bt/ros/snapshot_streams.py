@@ -30,6 +30,7 @@ import py_trees
 from py_trees.common import BlackBoxLevel, Status
 
 from sm_bt.behaviours.visitors import FeedbackSnapshotVisitor
+from sm_bt.ros import removable
 from sm_bt.tree_snapshot import BehaviourView, behaviours, blackboard_values
 
 log = logging.getLogger("sm_bt.ros.snapshot_streams")
@@ -97,7 +98,7 @@ class SnapshotStreams:
                 if topic in self._streams:
                     response.topic_name = topic  # the tools reopen after a restart: same stream
                     return response
-                stream = _Stream(topic, self._node.create_publisher(BehaviourTree, topic, latched))
+                stream = _Stream(topic, removable.publisher(self._node, BehaviourTree, topic, latched))
                 self._streams[topic] = stream
                 self._configure(stream, request.parameters)
                 self._publish(stream, changed=True)  # the tree as it is now, at once
