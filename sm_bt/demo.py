@@ -213,7 +213,7 @@ class Demo:
         self.world = World(time_scale=options.speed if options.ros else 1.0)
         self._started = 0.0  # the manager's clock when the run starts
         self._wall_started = time.monotonic()
-        self._lock = threading.Lock()  # on ROS, manager events come from the clock's thread
+        self._lock = threading.Lock()  # on ROS, manager events come from its executors' and clock's threads
         # Manager events during a tick wait until the tree's own news of that tick (a waypoint,
         # the battery) is told: that news is what made the tree ask.
         self._held: list[tuple[str, str]] | None = None

@@ -44,19 +44,24 @@ What the reference manager does not do, and this backend does:
   and answers ``success=false`` for one invalid in the node's state (it would crash its process on
   an invalid id); rclcpp checks the id.
 
-Threads: rclpy calls back in its executor thread, timers run in the :class:`WallClock` thread;
-every report and ``done`` goes to the listener through the clock (delay 0), so they reach the
-manager one at a time, in order, and never from inside a call. The rclpy node must be spun by an
+Threads: rclpy calls back in its executor thread, timers run in the :class:`WallClock` thread.
+Every report and ``done`` goes to the listener through one queue, so they reach the manager one at
+a time, in order, and never from inside a call: what an answer or event makes is run by the
+executor thread that heard it once its callback is done (a hop to another thread costs a wake-up,
+up to a millisecond on a busy machine, on every change); what a call or timer makes, by the clock
+(delay 0). The rclpy node must be spun by an
 executor (see :mod:`sm_bt.ros.runtime`); the backend never spins it itself.
 """
 
 from __future__ import annotations
 
 import collections
+import contextlib
 import enum
+import functools
 import logging
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -264,7 +269,8 @@ class RosBackend:
                 self._peers[name] = self._make_peer(name)
                 self._by_fqn[self._peers[name].fqn] = self._peers[name]
             self._subscriptions.append(removable.subscription(self._node, ParameterEvent, "/parameter_events",
-                                                              self._on_parameter_event, qos_profile_parameter_events))
+                                                              functools.partial(self._heard, self._on_parameter_event),
+                                                              qos_profile_parameter_events))
         self._poll_timer = self._clock.call_later(0.0, self._poll)
 
     def detach(self) -> None:
@@ -790,12 +796,16 @@ class RosBackend:
             call.timer = self._clock.call_later(timeout, expire)
         future = client.call_async(request)
         call.future = future
-        future.add_done_callback(lambda done: self._answered(call, done))
+        future.add_done_callback(lambda done: self._on_answer(call, done))
         return call
 
+    def _on_answer(self, call: _Call, future: Any) -> None:
+        # A cancelled one calls back in the thread that cancelled it (maybe inside the manager):
+        # nothing to report. Answers come from the executor.
+        if not future.cancelled():
+            self._heard(self._answered, call, future)
+
     def _answered(self, call: _Call, future: Any) -> None:
-        if future.cancelled():
-            return
         error = future.exception()
         if error is not None:
             self._finish(call, failure=f"{call.label} on {call.peer.part} failed: {error}")
@@ -872,8 +882,8 @@ class RosBackend:
             get_transitions=watch.create_client(GetAvailableTransitions, f"{fqn}/get_available_transitions"),
         )
         self._subscriptions.append(removable.subscription(
-            node, TransitionEvent, f"{fqn}/transition_event", lambda message: self._on_transition_event(peer, message),
-            QoSProfile(depth=10)))
+            node, TransitionEvent, f"{fqn}/transition_event",
+            functools.partial(self._heard, self._on_transition_event, peer), QoSProfile(depth=10)))
         return peer
 
     def _participant_of(self, peer: _Peer) -> bytes | None:
@@ -903,27 +913,62 @@ class RosBackend:
         return f"node {peer.part} is not reachable ({peer.gone or 'not found on the ROS graph yet'})"
 
     def _dispatch(self, action: Callable[[], None]) -> None:
-        """Hand a report or a ``done`` to the listener's side: the clock thread, in order."""
+        """Hand a report or a ``done`` to the listener's side, in order (see the module's doc)."""
         self._outbox.put(action)
+
+    def _heard(self, handler: Callable[..., None], *args: Any) -> None:
+        """An rclpy callback: ``handler(*args)``, then what it reported, in this thread."""
+        with self._outbox.held():
+            handler(*args)
 
 
 class _Outbox:
-    """Actions for the clock thread, run in order. Answers and events come in bursts (one per node
-    of a change): one clock callback runs every action waiting, not a timer and a wake for each."""
+    """Actions for the listener's side, run in order by one thread at a time. Answers and events come
+    in bursts (one per node of a change): one drain runs every action waiting.
+
+    By default the clock drains (delay 0). Within :meth:`held` (an rclpy callback) actions only
+    queue, and a thread that queued some drains when it leaves, unless another thread is draining
+    already (that one takes them in turn). A thread that queued nothing leaves the others' to them:
+    the watching executor's probe answers are not held back behind a burst of the backend's."""
 
     def __init__(self, clock: Clock) -> None:
         self._clock = clock
         self._actions: collections.deque[Callable[[], None]] = collections.deque()
         self._lock = threading.Lock()
         self._draining = False
+        self._holding = threading.local()
 
     def put(self, action: Callable[[], None]) -> None:
         with self._lock:
             self._actions.append(action)
+            if self._held():
+                self._holding.queued = True
+                return
             if self._draining:
                 return
             self._draining = True
         self._clock.call_later(0.0, self._drain)
+
+    def _held(self) -> int:
+        depth: int = getattr(self._holding, "depth", 0)
+        return depth
+
+    @contextlib.contextmanager
+    def held(self) -> Iterator[None]:
+        if not self._held():
+            self._holding.queued = False
+        self._holding.depth = self._held() + 1
+        try:
+            yield
+        finally:
+            self._holding.depth -= 1
+            if not self._holding.depth and self._holding.queued:
+                with self._lock:
+                    mine = bool(self._actions) and not self._draining
+                    if mine:
+                        self._draining = True
+                if mine:
+                    self._drain()
 
     def _drain(self) -> None:
         while True:

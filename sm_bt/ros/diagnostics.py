@@ -45,7 +45,7 @@ LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
 #: Every part's status is published this often (seconds), besides every change.
 PERIOD = 1.0
 #: Changes are gathered this long before they go out: one message for a change's burst of events,
-#: built after the change rather than in the middle of it (the clock thread also carries the calls).
+#: built after the change rather than in the middle of it (its threads also carry the answers).
 GATHER = 0.1
 
 

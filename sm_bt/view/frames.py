@@ -81,7 +81,7 @@ class FrameMaker:
         tree.add_post_tick_handler(self)
         self._epoch = manager.clock.now()
         self._events: list[dict[str, Any]] = []
-        self._events_lock = threading.Lock()  # manager events come from its clock's thread on ROS
+        self._events_lock = threading.Lock()  # on ROS, manager events come from its executors' and clock's threads
         self._ticks = 0
         self._last_modes: list[dict[str, Any]] | None = None
         self.last: Frame | None = None
