@@ -122,8 +122,9 @@ def node_processes_fixture() -> Iterator[Starter]:
     by PID at teardown, then the session's stale Fast DDS files are removed."""
     started: list[NodeProcess] = []
 
-    def start(model: str, *args: str, ready_timeout: float = READY_TIMEOUT) -> NodeProcess:
-        process = NodeProcess(model, *args, ready_timeout=ready_timeout)
+    def start(model: str, *args: str, ready_timeout: float = READY_TIMEOUT,
+              env: dict[str, str] | None = None) -> NodeProcess:
+        process = NodeProcess(model, *args, ready_timeout=ready_timeout, env=env)
         started.append(process)  # before start(): a process that never gets READY is stopped too
         return process.start()
 

@@ -26,6 +26,11 @@ WINDOW = 0.9
 #: What the verdict may take beyond the window: the clock thread's wake-up and the report.
 LATENCY = 0.2
 NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
+#: For the processes these tests freeze: over shared memory (Fast DDS's default between local
+#: processes), a write to a frozen process's full port blocks the writer until the transport's
+#: health check gives up (about a second, again and again), which a cut network never does; over
+#: UDP a datagram to a frozen process is simply lost, as over a cut link.
+UDP_ONLY = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 REASON = re.compile(r"no answer from /(\w+) for (?:0\.9|1\.0) s \(node exited, or network unreachable\)")
 
 
@@ -67,7 +72,7 @@ def _reachable(ros: RosRuntime, names: tuple[str, ...] = ("amcl", "controller_se
 
 
 class Stopped:
-    """SIGSTOP a node process now, SIGCONT when done (also when the test fails)."""
+    """SIGSTOP a node process (started with :data:`UDP_ONLY`) now, SIGCONT when done (also when the test fails)."""
 
     def __init__(self, process: NodeProcess) -> None:
         assert process.pid is not None
@@ -87,7 +92,7 @@ class Stopped:
 
 def test_a_silent_process_is_unreachable_within_the_window_then_reacquired(
         node_processes: Starter, runtime: RosRuntime) -> None:
-    nodes = node_processes("pilot", "--state", "inactive")
+    nodes = node_processes("pilot", "--state", "inactive", env=UDP_ONLY)
     _reachable(runtime)
     manager = runtime.manager
     with Stopped(nodes) as stopped:
@@ -109,7 +114,7 @@ def test_a_silent_process_is_unreachable_within_the_window_then_reacquired(
 
 def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diagnostics_say_so(
         node_processes: Starter, runtime: RosRuntime, ros_context: RosContext) -> None:
-    nodes = node_processes("pilot", "--state", "inactive")
+    nodes = node_processes("pilot", "--state", "inactive", env=UDP_ONLY)
     received = diagnostics(ros_context)
     _reachable(runtime)
     wait_until(lambda: statuses(received, "pilot"), 5.0, "no /diagnostics")
@@ -125,6 +130,7 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
         assert REASON.search(request.reason), request.reason
         # The configure requests abandoned unanswered are dropped with their clients: a DDS writer
         # would send them again once the node answers, and the node would configure late.
+        wait_until(lambda: not any(manager.observation(name).reachable for name in NODES), 1.0, "not all unreachable")
         renewed = [name for name in NODES if runtime.backend._peers[name].change_state is not clients[name]]
         assert "amcl" in renewed and "pointcloud_to_laser" not in renewed, renewed  # the latter stays inactive
         # What the manager knows now: the change is refused as a whole, and changes nothing.
@@ -143,8 +149,11 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
         assert arrived - stopped.at <= WINDOW + LATENCY + 0.1
         assert REASON.search(_values(status)["last_request_reason"]), _values(status)
         assert status.name == "sm_bt_liveness_test: pilot"
+        # Each node's verdict reaches /diagnostics with the next gathering (the request's failure went
+        # out at once, maybe before the node that did not fail it was reported).
+        wait_until(lambda: [s for _, s in statuses(received, "amcl") if s.level == ERROR], 1.0, "amcl not in ERROR")
         amcl = [status for _, status in statuses(received, "amcl") if status.level == ERROR]
-        assert amcl and REASON.search(amcl[-1].message) and _values(amcl[-1])["reachable"] == "false"
+        assert REASON.search(amcl[-1].message) and _values(amcl[-1])["reachable"] == "false"
 
 
 def _values(status: Any) -> dict[str, str]:

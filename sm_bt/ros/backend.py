@@ -147,6 +147,8 @@ class _Peer:
     probe: _Call | None = None
     last_probe: float = 0.0
     plain_since: float | None = None  # when parameter services were first seen without lifecycle ones
+    lifecycle_since: float | None = None  # when lifecycle services were first seen (while absent)
+    events_subscription: Any = None  # of its transition_event topic
     # Events seen while acquiring, applied after the node is reported (oldest first).
     buffered_state: State | None = None
     buffered_parameters: dict[str, ParamValue] = field(default_factory=dict)
@@ -474,6 +476,11 @@ class RosBackend:
         present = peer.presence is _Presence.PRESENT
         lifecycle_ready = peer.get_state.service_is_ready() if graph or not present else True
         parameters_ready = peer.get_parameters.service_is_ready() if graph or not present else True
+        # A lifecycle node is taken on once its transition events reach us too: a long transition
+        # of ours is told from a cut by its events (see ``_Peer.working``), and an event sent
+        # before its writer matched our reader is lost. A node whose events never come is taken
+        # on after ``acquire_timeout`` s anyway.
+        events_matched = lifecycle_ready and not present and peer.events_subscription.get_publisher_count() > 0
         if graph and present and peer.participant is None:  # its publishers may show up after it answered
             participant = self._participant_of(peer)
             with self._lock:
@@ -489,20 +496,24 @@ class RosBackend:
                 probe_due = probed and peer.probe is None and now - peer.last_probe >= self.probe_interval
             if presence is _Presence.ABSENT:
                 if lifecycle_ready:
+                    peer.lifecycle_since = now if peer.lifecycle_since is None else peer.lifecycle_since
+                    events_matched = events_matched or now - peer.lifecycle_since >= self.acquire_timeout
                     peer.plain_since = None
                 elif parameters_ready:
                     peer.plain_since = now if peer.plain_since is None else peer.plain_since
                 else:
                     peer.plain_since = None
+                if not lifecycle_ready:
+                    peer.lifecycle_since = None
         if presence is _Presence.PRESENT:
             if gone:
-                self._vanish(peer, f"node {peer.fqn} left the ROS graph")
+                self._vanish((peer, f"node {peer.fqn} left the ROS graph"))
             elif silent:
                 self._silence_verdict(peer)
             elif probe_due:
                 self._probe(peer, now)
         elif presence is _Presence.ABSENT:
-            if lifecycle_ready:
+            if lifecycle_ready and events_matched:
                 self._acquire(peer, lifecycle=True)
             elif peer.plain_since is not None and now - peer.plain_since >= self.plain_after:
                 self._acquire(peer, lifecycle=False)
@@ -510,7 +521,7 @@ class RosBackend:
     def _acquire(self, peer: _Peer, *, lifecycle: bool) -> None:
         """Ask a node that showed up for its state (lifecycle nodes) and parameters, then report it."""
         with self._lock:
-            peer.presence = _Presence.ACQUIRING
+            peer.presence, peer.lifecycle_since = _Presence.ACQUIRING, None
             peer.buffered_state = None
             peer.buffered_parameters = {}
             events_before = peer.events
@@ -684,23 +695,26 @@ class RosBackend:
             silent = [] if working or now - heard < window - _SLACK else \
                 [m for m in members if m.presence is _Presence.PRESENT]
             again = not silent and self._listener is not None and peer.presence is _Presence.PRESENT
-        for member in silent:
-            self._vanish(member, f"no answer from {member.fqn} for {now - heard:.1f} s (node exited, or network "
-                                 "unreachable)")
+        # One verdict for the process, all its nodes at once: a call failed by the first one's going
+        # must not judge the rest again from what is left (they were heard less recently).
+        self._vanish(*[(member, f"no answer from {member.fqn} for {now - heard:.1f} s (node exited, or network "
+                                "unreachable)") for member in silent])
         if again:
             self._clock.call_later(0.0 if not working else self.probe_interval, lambda: self._probe_if_due(peer))
 
-    def _vanish(self, peer: _Peer, reason: str) -> None:
+    def _vanish(self, *verdicts: tuple[_Peer, str]) -> None:
+        """Each ``(node, why)`` is gone: all marked first, then reported and their calls failed."""
         with self._lock:
-            if peer.presence is not _Presence.PRESENT:
-                return
-            peer.presence, peer.state, peer.probe, peer.gone = _Presence.ABSENT, State.UNKNOWN, None, reason
-            calls = list(peer.calls)
+            gone = [(peer, reason) for peer, reason in verdicts if peer.presence is _Presence.PRESENT]
+            for peer, reason in gone:
+                peer.presence, peer.state, peer.probe, peer.gone = _Presence.ABSENT, State.UNKNOWN, None, reason
+            calls = [(call, peer, reason) for peer, reason in gone for call in list(peer.calls)]
             listener = self._listener
-        log.debug("node %s vanished: %s", peer.fqn, reason)  # the manager logs it (WARNING)
-        if listener is not None:
-            self._dispatch(lambda: listener.node_vanished(peer.part, reason))
-        for call in calls:
+        for peer, reason in gone:
+            log.debug("node %s vanished: %s", peer.fqn, reason)  # the manager logs it (WARNING)
+            if listener is not None:
+                self._dispatch(functools.partial(listener.node_vanished, peer.part, reason))
+        for call, peer, reason in calls:
             self._finish(call, failure=f"node {peer.part} vanished: {reason}")
 
     # -- topics (executor thread) -------------------------------------------------------------------
@@ -881,9 +895,10 @@ class RosBackend:
             list_parameters=watch.create_client(ListParameters, f"{fqn}/list_parameters"),
             get_transitions=watch.create_client(GetAvailableTransitions, f"{fqn}/get_available_transitions"),
         )
-        self._subscriptions.append(removable.subscription(
+        peer.events_subscription = removable.subscription(
             node, TransitionEvent, f"{fqn}/transition_event",
-            functools.partial(self._heard, self._on_transition_event, peer), QoSProfile(depth=10)))
+            functools.partial(self._heard, self._on_transition_event, peer), QoSProfile(depth=10))
+        self._subscriptions.append(peer.events_subscription)
         return peer
 
     def _participant_of(self, peer: _Peer) -> bytes | None:
@@ -892,7 +907,12 @@ class RosBackend:
         namespace, node_name = (name[0] or "/"), name[1]
         try:
             for topic in (f"{peer.fqn}/transition_event", "/parameter_events"):
-                for info in self._node.get_publishers_info_by_topic(topic):
+                publishers = self._node.get_publishers_info_by_topic(topic)
+                if topic != "/parameter_events" and len(publishers) == 1:
+                    # Its own topic: DDS knows the writer before the ROS graph knows which node
+                    # it belongs to (the name is "_NODE_NAME_UNKNOWN_" meanwhile).
+                    return bytes(publishers[0].endpoint_gid[:12])
+                for info in publishers:
                     if info.node_name == node_name and info.node_namespace == namespace:
                         return bytes(info.endpoint_gid[:12])
         except Exception:  # the graph query is an optimisation: without it the node is probed alone

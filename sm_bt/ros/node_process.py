@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import collections
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -30,9 +31,12 @@ class NodesError(RuntimeError):
 class NodesProcess:
     """``python -m sm_bt.ros.sim_nodes MODEL ARGS...`` as a child process."""
 
-    def __init__(self, model: str, *args: str, ready_timeout: float = READY_TIMEOUT) -> None:
+    def __init__(self, model: str, *args: str, ready_timeout: float = READY_TIMEOUT,
+                 env: dict[str, str] | None = None) -> None:
         self.command = [sys.executable, "-m", "sm_bt.ros.sim_nodes", model, *args]
         self.ready_timeout = ready_timeout
+        #: Variables set for the child on top of this process's environment.
+        self.env = dict(env or {})
         self.process: subprocess.Popen[str] | None = None
         #: The fully qualified names of its nodes, from the READY line.
         self.names: list[str] = []
@@ -53,7 +57,8 @@ class NodesProcess:
         self._ready = threading.Event()
         started = time.monotonic()
         self.process = subprocess.Popen(self.command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                        stderr=subprocess.PIPE, text=True, bufsize=1)
+                                        stderr=subprocess.PIPE, text=True, bufsize=1,
+                                        env={**os.environ, **self.env} if self.env else None)
         self._readers = [
             threading.Thread(target=self._read, args=(self.process.stdout, self._stdout, True),
                              name="sim-nodes-stdout", daemon=True),
