@@ -189,6 +189,39 @@ def test_transition_request_info_carries_the_requested_transition_and_comes_befo
     assert manager.lines("change_state", "pilot", severities=("DEBUG",)), manager.stderr
 
 
+def test_what_nobody_read_when_it_changed_reaches_a_reader_that_comes_later(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext) -> None:
+    # The manager writes a topic only while someone reads it; the latest message waits for a reader.
+    manager = start_manager("--log-level", "warning")
+    node_processes("pilot")
+    manager.ready()
+    ros = ros_context
+    wait_for_pilot(ros)
+    before = time.time_ns()
+    for mode in ("__DEFAULT__", "f_normal_mode"):
+        assert change_mode(ros, "pilot", mode) is True
+        wait_for_mode(ros, "pilot", mode)
+    came = time.time_ns()
+    topics = {topic: latched(ros, kind, topic) for kind, topic in (
+        (ModeEvent, "/pilot/mode_event"), (TransitionEvent, "/pilot/transition_event"),
+        (ModeEvent, "/pilot/mode_request_info"), (TransitionEvent, "/pilot/transition_request_info"),
+        (ModeEvent, "/amcl/mode_event"))}
+    wait_until(lambda: all(topics.values()), 2.0, f"not every topic: {[t for t, m in topics.items() if not m]}")
+    time.sleep(0.5)  # nothing older may follow
+    # Exactly the latest of each, stamped when it happened (before this reader came).
+    assert pairs(topics["/pilot/mode_event"]) == [("__DEFAULT__", "f_normal_mode")]
+    [state] = topics["/pilot/transition_event"]
+    assert (state.start_state.label, state.goal_state.label) == ("activating", "active")
+    assert pairs(topics["/pilot/mode_request_info"]) == [("__DEFAULT__", "f_normal_mode")]
+    [request] = topics["/pilot/transition_request_info"]
+    # (f_normal_mode, within active, asked no transition: the last one is __DEFAULT__'s, from unconfigured)
+    assert (request.start_state.label, request.transition.label, request.goal_state.label) == (
+        "unconfigured", "configure", "active")
+    assert pairs(topics["/amcl/mode_event"]) == [("", "__DEFAULT__")]  # active (its default) in both
+    for messages in topics.values():
+        assert before <= messages[0].timestamp <= came
+
+
 # -- 9: what the manager logs when a node dies ------------------------------------------------------------
 
 

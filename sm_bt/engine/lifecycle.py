@@ -99,6 +99,9 @@ REQUESTABLE: tuple[Step, ...] = (
     Step(Transition.ACTIVE_SHUTDOWN, State.ACTIVE, State.SHUTTINGDOWN, State.FINALIZED),
 )
 
+#: The step of each requestable transition (each has one start state).
+STEP_OF: dict[Transition, Step] = {step.transition: step for step in REQUESTABLE}
+
 #: The requestable transitions by label, in lifecycle order (``shutdown`` resolves by start state).
 REQUESTABLE_LABELS: tuple[str, ...] = ("configure", "activate", "deactivate", "cleanup", "shutdown")
 
@@ -167,6 +170,22 @@ def plan(start: State, goal: State) -> tuple[Step, ...]:
     ``()`` when they are equal. ``PlanError`` when either is not a primary state, or when no path
     exists (nothing leaves ``finalized``).
     """
+    planned = _PLANS.get((start, goal))
+    if planned is None:
+        try:
+            planned = _search(start, goal)
+        except PlanError as error:
+            planned = error
+        _PLANS[(start, goal)] = planned  # a few dozen pairs of states: each searched once
+    if isinstance(planned, PlanError):
+        raise PlanError(str(planned))
+    return planned
+
+
+_PLANS: dict[tuple[State, State], tuple[Step, ...] | PlanError] = {}
+
+
+def _search(start: State, goal: State) -> tuple[Step, ...]:
     for state, role in ((start, "start"), (goal, "goal")):
         if state not in PRIMARY_STATES:
             raise PlanError(f"cannot plan from or to {state.label}: the {role} must be a primary state")

@@ -75,7 +75,7 @@ from rclpy.qos import QoSProfile, qos_profile_parameter_events
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
 from sm_bt.engine.clock import Clock, TimerHandle, WallClock
-from sm_bt.engine.lifecycle import REQUESTABLE, Transition
+from sm_bt.engine.lifecycle import STEP_OF, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import removable
@@ -297,21 +297,20 @@ class RosBackend:
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
         peer = self._peer(node)
+        step = STEP_OF.get(transition)
+        in_flight = _TransitionInFlight(step.goal if step is not None else None)
+        seen = in_flight.seen  # transition events received while the call is in flight
         with self._lock:
             refusal = self._refusal(peer)
             if refusal is None and not peer.lifecycle:
                 refusal = f"node {node} has no lifecycle services (parameters only): it cannot {transition.label}"
+            if refusal is None:
+                events_before = peer.events
+                peer.transitions_in_flight.append(in_flight)
         if refusal is not None:
             self._dispatch(lambda: done(CallResult(False, refusal)))
             return
-        request = ChangeState.Request()
-        request.transition = TransitionMsg(id=int(transition), label=transition.label)
-        step = next((s for s in REQUESTABLE if s.transition is transition), None)
-        in_flight = _TransitionInFlight(step.goal if step is not None else None)
-        seen = in_flight.seen  # transition events received while the call is in flight
-        with self._lock:
-            events_before = peer.events
-            peer.transitions_in_flight.append(in_flight)
+        request = _change_state_request(transition)
 
         def fail(reason: str, refused: bool = False) -> None:
             self._dispatch(lambda: done(CallResult(False, reason, refused)))
@@ -354,7 +353,7 @@ class RosBackend:
     def _transition_confirmed(self, peer: _Peer, transition: Transition, seen: list[State]) -> None:
         """A transition of ours succeeded: the node is in its goal now; report that at once and
         expect the events of it that have not come yet (the transition state, the goal)."""
-        step = next((s for s in REQUESTABLE if s.transition is transition), None)
+        step = STEP_OF.get(transition)
         if step is None:
             return
         deadline = self._clock.now() + ECHO_WINDOW
@@ -1008,6 +1007,15 @@ _SLACK = 1e-3  # timers fire a little early or late
 _APPLIED = SetParametersAtomically.Response(result=SetParametersResult(successful=True))
 #: list_parameters asked with this prefix answers with nothing: a liveness probe, not a query.
 _NO_SUCH_PREFIX = "sm_bt.liveness.none"
+@functools.cache
+def _change_state_request(transition: Transition) -> Any:
+    """The request of ``transition``, with its id and label: one per transition, for every call
+    (a request is serialised when it is sent; nothing keeps or changes it)."""
+    request = ChangeState.Request()
+    request.transition = TransitionMsg(id=int(transition), label=transition.label)
+    return request
+
+
 #: The liveness window is this many estimated round trips (``srtt + 4 rttvar``) where that is
 #: more than ``liveness_timeout``; never more than MAX_WINDOW.
 ADAPT = 2.0

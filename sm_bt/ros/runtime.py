@@ -22,7 +22,14 @@ context shut down has nothing left to remove and does not raise.
 Apart, each executor wakes over its own entities only: rclpy's executor rebuilds its wait set
 over every entity of its nodes for every message it handles (with 20 managed nodes, 1.9 ms for
 all of them together, 0.8 ms for the backend's), and the backend handles one per answer and
-event. ``close()`` stops in the order rclpy needs: the interface's executor, then the interface,
+event. The backend's node, where almost all of the traffic is, is spun by rclpy's
+``EventsExecutor`` where the installed rclpy has it (``events_executor=False``: the plain one):
+it dispatches from the middleware's own notifications, without a wait set, and the manager's
+process then spends less CPU on a change (with 20 nodes, 3.6 instead of 5.7 ms per request in
+that thread). It waits ``EVENTS_WAIT`` s at a time: each wait costs about 0.1 ms of setting up,
+and while an *unbounded* wait is in progress its ``wake()``, which rclpy calls whenever an entity
+of the node comes or goes (the backend renews a client after a cut), blocks until it ends.
+``close()`` stops in the order rclpy needs: the interface's executor, then the interface,
 the manager and backend, the other executors, the nodes and context.
 """
 
@@ -50,6 +57,8 @@ log = logging.getLogger("sm_bt.ros.runtime")
 MANAGER_NODE_NAME = "__mode_manager"
 #: The GIL switch interval while a runtime runs (see RosRuntime).
 SWITCH_INTERVAL = 0.0005
+#: How long the EventsExecutor waits at a time (see the module's doc).
+EVENTS_WAIT = 1.0
 
 
 def _quietly(action: Callable[[], object], what: str) -> None:
@@ -74,13 +83,14 @@ class RosRuntime:
     put back by :meth:`close`. Each answer and event crosses threads here (an executor's, then the
     clock's); at Python's default (5 ms) a thread that is computing holds the next one back for up
     to that long (the tail of a system event's delay: README, "Performance"). ``None`` leaves the
-    interpreter's setting alone.
+    interpreter's setting alone. ``events_executor``: spin the backend's node with rclpy's
+    ``EventsExecutor`` where there is one (see the module's doc).
     """
 
     def __init__(self, model: Model, *, node_name: str = MANAGER_NODE_NAME, serve: bool = True,
                  own_domain: bool = False, manager_options: Mapping[str, Any] | None = None,
                  backend_options: Mapping[str, Any] | None = None, node: Any = None,
-                 switch_interval: float | None = SWITCH_INTERVAL) -> None:
+                 switch_interval: float | None = SWITCH_INTERVAL, events_executor: bool = True) -> None:
         self._switch_interval: tuple[float, float] | None = None
         if node is None:
             prepare(own_domain=own_domain, local_only=own_domain)
@@ -115,7 +125,8 @@ class RosRuntime:
         self.executor = SingleThreadedExecutor(context=self.context)
         if self._owns_node:  # an application's node is spun by the application
             self.executor.add_node(self.node)
-        self.backend_executor = SingleThreadedExecutor(context=self.context)
+        self.backend_executor = (_events_executor(self.context) if events_executor else None) or \
+            SingleThreadedExecutor(context=self.context)
         self.backend_executor.add_node(self.backend_node)
         self.watch_executor = SingleThreadedExecutor(context=self.context)
         self.watch_executor.add_node(self.watch_node)
@@ -214,13 +225,30 @@ class RosRuntime:
         self.close()
 
 
+def _events_executor(context: Any) -> Any:
+    """rclpy's EventsExecutor for ``context``, or None where this rclpy has none.
+
+    Made as ``rclpy.experimental.EventsExecutor`` makes it, except that it leaves the process's
+    ``faulthandler`` alone (enabling it is not a library's choice, and fails where ``sys.stderr``
+    has no file descriptor, as under pytest or in an embedding application)."""
+    try:
+        from rclpy.impl.implementation_singleton import rclpy_implementation
+
+        executor = rclpy_implementation.EventsExecutor(context)
+    except (ImportError, AttributeError):
+        return None
+    context.on_shutdown(executor.wake)
+    return executor
+
+
 class _Spinner:
     """One executor's thread, stoppable between callbacks.
 
     ``spin()`` itself cannot be stopped safely: ``Executor.shutdown()`` under a spinning thread drops
     its guard condition while callbacks may still schedule work (an AttributeError in that thread).
-    :meth:`stop` sets a flag and triggers a guard condition whose empty callback makes
-    ``spin_once()`` return, so that the thread sees the flag.
+    :meth:`stop` sets a flag and wakes ``spin_once()`` so that the thread sees the flag: with a
+    guard condition whose callback does nothing, or, for an EventsExecutor (which has no guard
+    conditions), with a timer of its node that fires at once when reset (the bell).
     """
 
     def __init__(self, executor: Any, node: Any, name: str, context: Any) -> None:
@@ -228,23 +256,47 @@ class _Spinner:
         self.node = node
         self._context = context
         self._stopping = threading.Event()
-        self._waker = node.create_guard_condition(lambda: None)
+        self._plain = hasattr(executor, "wait_for_ready_callbacks")
+        self._waker: Any = None
+        self._bell: Any = None
+        if self._plain:
+            self._waker = node.create_guard_condition(lambda: None)
+        else:
+            from rclpy.clock import Clock
+            from rclpy.clock_type import ClockType
+
+            # On the steady clock: with simulated time a ROS-time timer would wait for /clock.
+            self._bell = node.create_timer(1e-6, self._rung, clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self._bell.cancel()
         self._thread = threading.Thread(target=self._spin, name=f"sm_bt-ros-{name}", daemon=True)
         self._thread.start()
+
+    def _rung(self) -> None:
+        self._bell.cancel()
 
     def _spin(self) -> None:
         from rclpy.executors import ExternalShutdownException
 
+        timeout = None if self._plain else EVENTS_WAIT
         with contextlib.suppress(ExternalShutdownException):  # the context shut down under us
             while not self._stopping.is_set() and self._context.ok():
-                self.executor.spin_once()
+                self.executor.spin_once(timeout_sec=timeout)
+
+    def _wake(self) -> None:
+        if self._waker is not None:
+            _quietly(self._waker.trigger, "waking the executor")
+        elif self._bell is not None:
+            _quietly(self._bell.reset, "ringing the bell")
 
     def stop(self, timeout: float = 3.0) -> None:
         """Return once the thread has left ``spin_once`` (or after ``timeout``); idempotent."""
         if not self._stopping.is_set():
             self._stopping.set()
-            _quietly(self._waker.trigger, "waking the executor")
+            self._wake()
         self._thread.join(timeout)
 
     def remove_waker(self) -> None:
-        _quietly(functools.partial(self.node.destroy_guard_condition, self._waker), "removing the waker")
+        if self._waker is not None:
+            _quietly(functools.partial(self.node.destroy_guard_condition, self._waker), "removing the waker")
+        if self._bell is not None:
+            _quietly(functools.partial(self.node.destroy_timer, self._bell), "removing the bell")
