@@ -71,7 +71,7 @@ def test_a_stop_ends_the_wait_at_once(spun: tuple[Any, _Spinner]) -> None:
     assert time.monotonic() - began < EVENTS_WAIT / 4
 
 
-def test_the_runtime_spins_the_backends_node_with_an_events_executor_and_stops_at_once() -> None:
+def test_the_runtime_spins_the_backends_and_watching_nodes_with_events_executors_and_stops_at_once() -> None:
     from engine_helpers import bundled
 
     ros = RosRuntime(bundled("pilot"), node_name="sm_bt_spinner_runtime", serve=False,
@@ -80,6 +80,7 @@ def test_the_runtime_spins_the_backends_node_with_an_events_executor_and_stops_a
                        manager_options={"rules": False, "recovery": False})
     try:
         assert not hasattr(ros.backend_executor, "wait_for_ready_callbacks"), "an EventsExecutor"
+        assert not hasattr(ros.watch_executor, "wait_for_ready_callbacks"), "an EventsExecutor"
         assert hasattr(plain.backend_executor, "wait_for_ready_callbacks"), "rclpy's plain executor"
         time.sleep(0.2)
     finally:
