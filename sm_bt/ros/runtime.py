@@ -27,9 +27,10 @@ clients for 20 nodes, woken by every liveness probe) are spun by rclpy's ``Event
 where the installed rclpy has it (``events_executor=False``: the plain one): it dispatches from
 the middleware's own notifications, without a wait set, and the manager's process then spends
 less CPU on a change (with 20 nodes, 3.1 instead of 6.4 ms per request in the backend's thread)
-and when idle (0.65 instead of 0.85 % of a core). It waits ``EVENTS_WAIT`` s at a time: each wait costs about 0.1 ms of setting up,
-and while an *unbounded* wait is in progress its ``wake()``, which rclpy calls whenever an entity
-of the node comes or goes (the backend renews a client after a cut), blocks until it ends.
+and when idle (0.65 instead of 0.85 % of a core). It waits ``EVENTS_WAIT`` s at a time: each
+wait costs about 0.1 ms of setting up, and while an *unbounded* wait is in progress its
+``wake()``, which rclpy calls whenever an entity of the node comes or goes (the backend renews a
+client after a cut), blocks until it ends.
 ``close()`` stops in the order rclpy needs: the interface's executor, then the interface,
 the manager and backend, the other executors, the nodes and context.
 """
