@@ -56,7 +56,7 @@ def statuses(messages: list[Any], part: str) -> list[tuple[float, Any]]:
             if status.hardware_id == part]
 
 
-def diagnostics(ros_context: RosContext) -> list[Any]:
+def diagnostics_of(ros_context: RosContext) -> list[Any]:
     """The /diagnostics arrays received from now on, each with its arrival time (time.monotonic)."""
     from diagnostic_msgs.msg import DiagnosticArray
 
@@ -115,7 +115,7 @@ def test_a_silent_process_is_unreachable_within_the_window_then_reacquired(
 def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diagnostics_say_so(
         node_processes: Starter, runtime: RosRuntime, ros_context: RosContext) -> None:
     nodes = node_processes("pilot", "--state", "inactive", env=UDP_ONLY)
-    received = diagnostics(ros_context)
+    received = diagnostics_of(ros_context)
     _reachable(runtime)
     wait_until(lambda: statuses(received, "pilot"), 5.0, "no /diagnostics")
     manager = runtime.manager
@@ -209,3 +209,28 @@ def test_a_change_whose_answers_are_lost_is_confirmed_by_the_nodes_events(
     assert request.succeeded, request.reason
     assert manager.actual("pilot").state_mode.mode == "f_normal_mode"
     assert sum(client.sent for pair in lost.values() for client in pair) >= 3  # every call through a lossy client
+
+
+def test_diagnostics_are_built_only_for_a_reader_who_gets_every_part_within_the_period(
+        monkeypatch: pytest.MonkeyPatch, ros_context: RosContext) -> None:
+    from sm_bt.ros import diagnostics
+
+    built: list[list[str]] = []
+    statuses = diagnostics.DiagnosticsPublisher.statuses
+
+    def counted(self: diagnostics.DiagnosticsPublisher, parts: list[str]) -> list[diagnostics.PartStatus]:
+        built.append(parts)
+        return statuses(self, parts)
+
+    monkeypatch.setattr(diagnostics.DiagnosticsPublisher, "statuses", counted)
+    ros = RosRuntime(bundled("pilot"), node_name="sm_bt_diagnostics_test",
+                     manager_options={"rules": False, "recovery": False})
+    try:
+        time.sleep(diagnostics.PERIOD + 0.3)  # a full publication was due, and changes came (nodes unseen)
+        assert built == [], "nothing built while nobody reads /diagnostics"
+        received = diagnostics_of(ros_context)
+        wait_until(lambda: any(len(m.status) == 5 for _, m in list(received)), diagnostics.PERIOD + 1.5,
+                   "no full /diagnostics for a reader that came")
+        assert built
+    finally:
+        ros.close()
