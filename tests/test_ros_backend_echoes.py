@@ -111,3 +111,23 @@ def test_the_outbox_runs_a_burst_in_order_in_one_clock_callback_and_survives_a_b
     assert ran == [1, 2]
     clock.run_pending()
     assert ran == [1, 2, 3]
+
+
+def test_a_modes_parameter_request_is_built_once_and_keeps_each_values_type() -> None:
+    from rcl_interfaces.msg import ParameterType
+
+    from sm_bt.ros.backend import _set_parameters_request, _typed_items
+
+    def request(values: dict[str, object]) -> object:
+        return _set_parameters_request(_typed_items(values))  # type: ignore[arg-type]
+
+    first = request({"speed": 1, "modes": (1, 2)})
+    assert request({"speed": 1, "modes": (1, 2)}) is first, "built once per mode"
+    assert request({"speed": 1, "modes": [1, 2]}) is first, "a list is the tuple it holds"
+    # Equal in Python, not to a node: each gets a request of its own type.
+    as_bool, as_float = request({"speed": True, "modes": (True, False)}), request({"speed": 1.0, "modes": (1, 2)})
+    assert [p.value.type for p in first.parameters] == [ParameterType.PARAMETER_INTEGER,  # type: ignore[attr-defined]
+                                                        ParameterType.PARAMETER_INTEGER_ARRAY]
+    assert [p.value.type for p in as_bool.parameters] == [ParameterType.PARAMETER_BOOL,  # type: ignore[attr-defined]
+                                                          ParameterType.PARAMETER_BOOL_ARRAY]
+    assert as_float.parameters[0].value.type == ParameterType.PARAMETER_DOUBLE  # type: ignore[attr-defined]

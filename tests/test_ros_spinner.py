@@ -1,6 +1,6 @@
 """The runtime's executor threads over an EventsExecutor: entities of the node may come and go
-from other threads while it waits (never blocked, and served at once), a stop ends the wait at
-once, and the runtime spins the backend's node with one."""
+from other threads while it waits (never blocked, and served at once), one wait serves a burst of
+messages, a stop ends the wait at once, and the runtime spins the backend's node with one."""
 
 from __future__ import annotations
 
@@ -12,6 +12,25 @@ import pytest
 from ros_processes import wait_until
 
 from sm_bt.ros.runtime import EVENTS_WAIT, RosRuntime, _events_executor, _Spinner
+
+
+class _CountingExecutor:
+    """An executor whose waits are counted (everything else is the executor's own)."""
+
+    def __init__(self, executor: Any) -> None:
+        self._executor = executor
+        self.waits = 0
+
+    def spin_until_future_complete(self, *args: Any, **kwargs: Any) -> None:
+        self.waits += 1
+        self._executor.spin_until_future_complete(*args, **kwargs)
+
+    def spin_once(self, *args: Any, **kwargs: Any) -> None:
+        self.waits += 1
+        self._executor.spin_once(*args, **kwargs)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._executor, name)
 
 
 @pytest.fixture
@@ -27,7 +46,7 @@ def spun() -> Iterator[tuple[Any, _Spinner]]:
     executor = _events_executor(context)
     assert executor is not None, "the pinned rclpy has an EventsExecutor"
     executor.add_node(node)
-    spinner = _Spinner(executor, node, "test", context)
+    spinner = _Spinner(_CountingExecutor(executor), node, "test", context)
     try:
         yield node, spinner
     finally:
@@ -60,6 +79,26 @@ def test_entities_come_and_go_from_another_thread_during_a_wait_and_are_served_a
         began = time.monotonic()
         node.destroy_subscription(subscription)
         assert time.monotonic() - began < EVENTS_WAIT / 4
+
+
+def test_one_wait_serves_a_burst_of_messages(spun: tuple[Any, _Spinner]) -> None:
+    # A wait per message costs a set-up and a trip through the interpreter's lock each: a burst of
+    # answers (one per node of a change) then queues behind itself (README, "Performance", P2).
+    from std_msgs.msg import String
+
+    node, spinner = spun
+    received: list[str] = []
+    publisher = node.create_publisher(String, "/sm_bt_spinner_test/burst", 200)
+    subscription = node.create_subscription(String, "/sm_bt_spinner_test/burst",
+                                            lambda m: received.append(m.data), 200)
+    wait_until(lambda: subscription.get_publisher_count() > 0, 5.0, "not matched")
+    time.sleep(0.1)
+    before = spinner.executor.waits
+    for index in range(100):
+        publisher.publish(String(data=str(index)))
+    wait_until(lambda: len(received) == 100, 5.0, "the burst was not served")
+    assert received == [str(index) for index in range(100)]
+    assert spinner.executor.waits - before <= 3, f"{spinner.executor.waits - before} waits for 100 messages"
 
 
 def test_a_stop_ends_the_wait_at_once(spun: tuple[Any, _Spinner]) -> None:
