@@ -1,5 +1,7 @@
 """The ROS backend reports our own changes from the service responses and does not report their
-echoes (``/parameter_events``, ``transition_event``) again, while changes by anyone else still are.
+echoes (``/parameter_events``, ``transition_event``) again, while changes by anyone else still are;
+the transition state of a quick transition of ours is not reported at all, whichever of answer and
+events comes first.
 
 The bookkeeping is checked here without a ROS graph (a backend object with only its clock), so
 that the orderings that are rare on a real graph can be played exactly: an echo before the
@@ -13,7 +15,17 @@ import threading
 from sm_bt.engine.clock import VirtualClock
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State
-from sm_bt.ros.backend import ECHO_WINDOW, RosBackend, _echo, _Outbox, _Peer, _Presence, _SetInFlight
+from sm_bt.ros.backend import (
+    ECHO_WINDOW,
+    VIA_GRACE,
+    RosBackend,
+    _echo,
+    _Outbox,
+    _Peer,
+    _Presence,
+    _SetInFlight,
+    _TransitionInFlight,
+)
 
 
 class _Listener:
@@ -32,6 +44,8 @@ def _backend() -> tuple[RosBackend, _Peer, _Listener, VirtualClock]:
     backend._listener = listener  # type: ignore[assignment]
     backend._lock = threading.Lock()
     backend._outbox = _Outbox(clock)
+    backend._held_back = {}
+    backend._held_timer = None
     peer = _Peer("amcl", "/amcl", ("alpha",), None, None, None, None, None, None, presence=_Presence.PRESENT,
                  state=State.INACTIVE)
     return backend, peer, listener, clock
@@ -131,3 +145,45 @@ def test_a_modes_parameter_request_is_built_once_and_keeps_each_values_type() ->
     assert [p.value.type for p in as_bool.parameters] == [ParameterType.PARAMETER_BOOL,  # type: ignore[attr-defined]
                                                           ParameterType.PARAMETER_BOOL_ARRAY]
     assert as_float.parameters[0].value.type == ParameterType.PARAMETER_DOUBLE  # type: ignore[attr-defined]
+
+
+def _event(state: State) -> object:
+    from lifecycle_msgs.msg import State as StateMsg
+    from lifecycle_msgs.msg import TransitionEvent
+
+    return TransitionEvent(goal_state=StateMsg(id=int(state), label=state.label))
+
+
+def _activating(peer: _Peer) -> None:
+    """An activate of ours in flight on ``peer`` (inactive)."""
+    peer.transitions_in_flight.append(_TransitionInFlight(State.ACTIVE, State.ACTIVATING))
+
+
+def test_the_transition_state_of_a_quick_transition_of_ours_is_not_reported() -> None:
+    backend, peer, listener, clock = _backend()
+    _activating(peer)
+    backend._on_transition_event(peer, _event(State.ACTIVATING))  # type: ignore[arg-type]
+    clock.advance(VIA_GRACE / 2)
+    assert listener.states == [] and peer.state is State.ACTIVATING, "the backend knows; the manager waits"
+    backend._on_transition_event(peer, _event(State.ACTIVE))  # type: ignore[arg-type]
+    clock.advance(2 * VIA_GRACE)
+    assert listener.states == [State.ACTIVE]
+    assert backend._held_back == {} and backend._held_timer is None
+
+
+def test_the_transition_state_of_a_slow_transition_of_ours_is_reported_once_it_lasts() -> None:
+    backend, peer, listener, clock = _backend()
+    _activating(peer)
+    backend._on_transition_event(peer, _event(State.ACTIVATING))  # type: ignore[arg-type]
+    clock.advance(VIA_GRACE)
+    assert listener.states == [State.ACTIVATING]
+    backend._on_transition_event(peer, _event(State.ACTIVE))  # type: ignore[arg-type]
+    clock.run_pending()
+    assert listener.states == [State.ACTIVATING, State.ACTIVE]
+
+
+def test_a_transition_state_of_someone_elses_transition_is_reported_at_once() -> None:
+    backend, peer, listener, clock = _backend()
+    backend._on_transition_event(peer, _event(State.ACTIVATING))  # type: ignore[arg-type]
+    clock.run_pending()
+    assert listener.states == [State.ACTIVATING]

@@ -116,21 +116,19 @@ def test_waiting_for_nodes_that_are_not_there_names_them() -> None:
         app.close()
 
 
-def test_the_runtime_sets_the_switch_interval_while_it_runs_and_puts_it_back() -> None:
+def test_the_runtime_leaves_the_switch_interval_alone_unless_asked_and_puts_it_back() -> None:
     import sys
 
-    from sm_bt.ros.runtime import SWITCH_INTERVAL
-
     before = sys.getswitchinterval()
-    assert abs(before - SWITCH_INTERVAL) > 1e-6  # the interpreter's own (5 ms) at the start
-    runtime = RosRuntime(bundled("pilot"), serve=False)
-    try:
-        assert abs(sys.getswitchinterval() - SWITCH_INTERVAL) < 1e-7
-    finally:
-        runtime.close()
-    assert sys.getswitchinterval() == before
-    left_alone = RosRuntime(bundled("pilot"), serve=False, switch_interval=None)
+    left_alone = RosRuntime(bundled("pilot"), serve=False)
     try:
         assert sys.getswitchinterval() == before
     finally:
         left_alone.close()
+    asked = before / 4
+    runtime = RosRuntime(bundled("pilot"), serve=False, switch_interval=asked)
+    try:
+        assert abs(sys.getswitchinterval() - asked) < 1e-7
+    finally:
+        runtime.close()
+    assert sys.getswitchinterval() == before
