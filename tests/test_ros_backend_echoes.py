@@ -147,13 +147,6 @@ def test_a_modes_parameter_request_is_built_once_and_keeps_each_values_type() ->
     assert as_float.parameters[0].value.type == ParameterType.PARAMETER_DOUBLE  # type: ignore[attr-defined]
 
 
-def _event(state: State) -> object:
-    from lifecycle_msgs.msg import State as StateMsg
-    from lifecycle_msgs.msg import TransitionEvent
-
-    return TransitionEvent(goal_state=StateMsg(id=int(state), label=state.label))
-
-
 def _activating(peer: _Peer) -> None:
     """An activate of ours in flight on ``peer`` (inactive)."""
     peer.transitions_in_flight.append(_TransitionInFlight(State.ACTIVE, State.ACTIVATING))
@@ -162,10 +155,10 @@ def _activating(peer: _Peer) -> None:
 def test_the_transition_state_of_a_quick_transition_of_ours_is_not_reported() -> None:
     backend, peer, listener, clock = _backend()
     _activating(peer)
-    backend._on_transition_event(peer, _event(State.ACTIVATING))  # type: ignore[arg-type]
+    backend._on_transition_event(peer, State.ACTIVATING)
     clock.advance(VIA_GRACE / 2)
     assert listener.states == [] and peer.state is State.ACTIVATING, "the backend knows; the manager waits"
-    backend._on_transition_event(peer, _event(State.ACTIVE))  # type: ignore[arg-type]
+    backend._on_transition_event(peer, State.ACTIVE)
     clock.advance(2 * VIA_GRACE)
     assert listener.states == [State.ACTIVE]
     assert backend._held_back == {} and backend._held_timer is None
@@ -174,16 +167,16 @@ def test_the_transition_state_of_a_quick_transition_of_ours_is_not_reported() ->
 def test_the_transition_state_of_a_slow_transition_of_ours_is_reported_once_it_lasts() -> None:
     backend, peer, listener, clock = _backend()
     _activating(peer)
-    backend._on_transition_event(peer, _event(State.ACTIVATING))  # type: ignore[arg-type]
+    backend._on_transition_event(peer, State.ACTIVATING)
     clock.advance(VIA_GRACE)
     assert listener.states == [State.ACTIVATING]
-    backend._on_transition_event(peer, _event(State.ACTIVE))  # type: ignore[arg-type]
+    backend._on_transition_event(peer, State.ACTIVE)
     clock.run_pending()
     assert listener.states == [State.ACTIVATING, State.ACTIVE]
 
 
 def test_a_transition_state_of_someone_elses_transition_is_reported_at_once() -> None:
     backend, peer, listener, clock = _backend()
-    backend._on_transition_event(peer, _event(State.ACTIVATING))  # type: ignore[arg-type]
+    backend._on_transition_event(peer, State.ACTIVATING)
     clock.run_pending()
     assert listener.states == [State.ACTIVATING]

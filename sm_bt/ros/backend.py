@@ -84,6 +84,7 @@ from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import removable
 from sm_bt.ros.parameters import from_parameter_value, from_parameters, to_parameters
+from sm_bt.ros.transition_events import goal_state_id
 
 log = logging.getLogger("sm_bt.ros.backend")
 
@@ -729,8 +730,15 @@ class RosBackend:
 
     # -- topics (executor thread) -------------------------------------------------------------------
 
-    def _on_transition_event(self, peer: _Peer, message: TransitionEvent) -> None:
-        state = _state_of(message.goal_state.id)
+    def _on_raw_transition_event(self, peer: _Peer, raw: bytes) -> None:
+        try:
+            state = _state_of(goal_state_id(raw))
+        except Exception:  # not a TransitionEvent after all: nothing to learn from it
+            log.warning("unreadable transition event from %s (%d bytes) ignored", peer.fqn, len(raw))
+            return
+        self._on_transition_event(peer, state)
+
+    def _on_transition_event(self, peer: _Peer, state: State) -> None:
         with self._lock:
             peer.events += 1
             now = peer.last_heard = peer.state_heard = self._clock.now()
@@ -934,7 +942,7 @@ class RosBackend:
         )
         peer.events_subscription = removable.subscription(
             node, TransitionEvent, f"{fqn}/transition_event",
-            functools.partial(self._heard, self._on_transition_event, peer), QoSProfile(depth=10))
+            functools.partial(self._heard, self._on_raw_transition_event, peer), QoSProfile(depth=10), raw=True)
         self._subscriptions.append(peer.events_subscription)
         return peer
 

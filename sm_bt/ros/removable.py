@@ -14,11 +14,13 @@ from collections.abc import Callable
 from typing import Any
 
 
-def subscription(node: Any, kind: Any, topic: str, callback: Callable[[Any], None], qos: Any) -> Any:
-    """``node.create_subscription`` without event handlers."""
+def subscription(node: Any, kind: Any, topic: str, callback: Callable[[Any], None], qos: Any, *,
+                 raw: bool = False) -> Any:
+    """``node.create_subscription`` without event handlers (``raw``: the callback gets the
+    serialised bytes)."""
     from rclpy.event_handler import SubscriptionEventCallbacks
 
-    return node.create_subscription(kind, topic, callback, qos,
+    return node.create_subscription(kind, topic, callback, qos, raw=raw,
                                      event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
 
 
