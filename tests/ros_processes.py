@@ -14,6 +14,8 @@ import collections
 import contextlib
 import os
 import re
+import signal
+import subprocess
 import sys
 import threading
 import time
@@ -323,3 +325,23 @@ def start_manager_fixture() -> Iterator[Callable[..., ManagerProcess]]:
         process.join_starter()
         process.stop()
     remove_stale_shm_files()
+
+
+#: Environment for a process a test may have to diagnose: SIGABRT prints every thread's stack.
+DUMPABLE = {"PYTHONFAULTHANDLER": "1"}
+
+
+def communicate_or_dump(process: subprocess.Popen[str], timeout: float) -> tuple[str, str]:
+    """``process.communicate(timeout)``; if it does not end in time, its threads' stacks (it was
+    started with :data:`DUMPABLE`: SIGABRT makes faulthandler print them) go into the failure."""
+    try:
+        out, err = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.send_signal(signal.SIGABRT)
+        try:
+            _, err = process.communicate(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            _, err = process.communicate(timeout=5.0)
+        raise AssertionError(f"still running {timeout:g} s later; its threads were:\n{err[-6000:]}") from None
+    return out, err

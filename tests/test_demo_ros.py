@@ -28,7 +28,7 @@ from py_trees_ros_interfaces.msg import BehaviourTree
 from py_trees_ros_interfaces.srv import OpenSnapshotStream
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rich.console import Console
-from ros_processes import RosContext, Starter
+from ros_processes import DUMPABLE, RosContext, Starter, communicate_or_dump
 from tree_helpers import PILOT_DEMO_STORY, assert_in_order
 
 from sm_bt.cli import main
@@ -156,7 +156,7 @@ def test_simulated_and_ros_demos_visit_the_same_pilot_modes(ros_demo: tuple[int,
 
 
 def test_ctrl_c_stops_the_ros_demo_and_its_node_process() -> None:
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **DUMPABLE}
     demo = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "demo", "--ros"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
     child: int | None = None
@@ -172,7 +172,7 @@ def test_ctrl_c_stops_the_ros_demo_and_its_node_process() -> None:
         assert child is not None, demo.stderr.read() if demo.stderr else ""
         demo.send_signal(signal.SIGINT)
         # Drain the pipes while waiting: a demo blocked writing to a full pipe cannot finish.
-        _, err = demo.communicate(timeout=10.0)
+        _, err = communicate_or_dump(demo, 10.0)
         assert demo.returncode == 130, err
         assert "sm-bt: interrupted" in err
         with pytest.raises(ProcessLookupError):

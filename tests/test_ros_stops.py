@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Callable
 
-from ros_processes import ManagerProcess, RosContext, Starter, wait_until
+from ros_processes import DUMPABLE, ManagerProcess, RosContext, Starter, communicate_or_dump, wait_until
 from system_modes_msgs.srv import ChangeMode
 
 STOPS = 6
@@ -52,13 +52,14 @@ def test_the_monitor_stops_within_two_seconds_of_sigint(node_processes: Starter)
     node_processes("pilot")
     for args in (["--duration", "60"], ["--change", "pilot=configure", "--duration", "60"]):
         monitor = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "monitor", "pilot", "--ros", *args],
-                                   stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                   stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                   env={**os.environ, **DUMPABLE})
         try:
             time.sleep(2.5)  # discovering the nodes, or watching
             assert monitor.poll() is None, monitor.communicate()
             monitor.send_signal(signal.SIGINT)
             sent = time.monotonic()
-            _, err = monitor.communicate(timeout=PROMPT + 3.0)
+            _, err = communicate_or_dump(monitor, PROMPT + 3.0)
             took = time.monotonic() - sent
             assert took < PROMPT, f"stopped {took:.2f} s after SIGINT"
             assert "Traceback" not in err, err
