@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,12 @@ import sm_bt.ros.environment
 # Before any test starts rclpy or a ROS process (they inherit it): local discovery, this run's domain.
 # prepare() itself needs no rclpy, so this is harmless where ROS 2 is not installed.
 sm_bt.ros.environment.prepare(own_domain=True)
+
+# A run started where SIGINT is ignored (a background job of a non-interactive shell) would hand
+# that on to every process it starts, and a test that stops one with SIGINT would wait in vain
+# (Python installs its KeyboardInterrupt handler only where SIGINT is not ignored at start).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 MODELS = Path(__file__).parent / "models"
 

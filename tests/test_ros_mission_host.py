@@ -3,6 +3,7 @@ parameters), serving the system_modes interface while it ticks, ending cleanly o
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -10,7 +11,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from ros_processes import RosContext, Starter, wait_until
+from ros_processes import DUMPABLE, RosContext, Starter, communicate_or_dump, wait_until
 from system_modes_msgs.srv import GetMode
 
 MISSION = """<root main_tree_to_execute="Mission">
@@ -30,17 +31,14 @@ def _host(tmp_path: Path, *parameters: str) -> subprocess.Popen[str]:
     command = [sys.executable, "-m", "sm_bt.ros.host", "--ros-args"]
     for parameter in parameters:
         command += ["-p", parameter]
-    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                            env={**os.environ, **DUMPABLE})
 
 
 def _stop(process: subprocess.Popen[str]) -> tuple[int, str]:
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
-    try:
-        _, err = process.communicate(timeout=8.0)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        _, err = process.communicate(timeout=3.0)
+    _, err = communicate_or_dump(process, 8.0)
     return process.returncode, err
 
 
