@@ -31,9 +31,13 @@ from sm_bt.ros.backend import (
 class _Listener:
     def __init__(self) -> None:
         self.states: list[State] = []
+        self.parameters: list[tuple[str, dict[str, object]]] = []
 
     def node_state(self, node: str, state: State) -> None:
         self.states.append(state)
+
+    def node_parameters(self, node: str, changed: dict[str, object]) -> None:
+        self.parameters.append((node, dict(changed)))
 
 
 def _backend() -> tuple[RosBackend, _Peer, _Listener, VirtualClock]:
@@ -180,3 +184,27 @@ def test_a_transition_state_of_someone_elses_transition_is_reported_at_once() ->
     backend._on_transition_event(peer, State.ACTIVATING)
     clock.run_pending()
     assert listener.states == [State.ACTIVATING]
+
+
+def test_parameter_events_are_read_from_their_bytes_and_other_nodes_ones_dropped_by_name() -> None:
+    from rcl_interfaces.msg import ParameterEvent
+    from rclpy.serialization import serialize_message
+
+    from sm_bt.ros.parameters import to_parameters
+
+    backend, peer, listener, clock = _backend()
+    backend._by_fqn = {peer.fqn: peer}
+
+    def event(node: str, values: dict[str, object], representation: bytes = b"") -> bytes:
+        raw = bytes(serialize_message(ParameterEvent(node=node, changed_parameters=to_parameters(values))))  # type: ignore[arg-type]
+        return representation + raw[len(representation):]
+
+    backend._on_raw_parameter_event(event("/planner", {"alpha": 0.5}))
+    backend._on_raw_parameter_event(event("/amcl", {"alpha": 0.5, "unmodelled": 1}))
+    clock.run_pending()
+    assert listener.parameters == [("amcl", {"alpha": 0.5})], "someone else's change of ours, reported"
+    # Bytes that are not plain CDR go the usual way: rclpy reads them, or they are dropped with a warning.
+    backend._on_raw_parameter_event(event("/amcl", {"alpha": 0.75}, b"\x00\x07"))
+    backend._on_raw_parameter_event(b"\x00\x07\x00\x00 not an event")
+    clock.run_pending()
+    assert listener.parameters[1:] == [("amcl", {"alpha": 0.75})]

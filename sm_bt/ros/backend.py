@@ -83,8 +83,8 @@ from sm_bt.engine.lifecycle import STEP_OF, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import removable
+from sm_bt.ros.cdr import goal_state_id, parameter_event_node, parameter_event_values
 from sm_bt.ros.parameters import from_parameter_value, from_parameters, to_parameters
-from sm_bt.ros.transition_events import goal_state_id
 
 log = logging.getLogger("sm_bt.ros.backend")
 
@@ -280,8 +280,9 @@ class RosBackend:
                 self._peers[name] = self._make_peer(name)
                 self._by_fqn[self._peers[name].fqn] = self._peers[name]
             self._subscriptions.append(removable.subscription(self._node, ParameterEvent, "/parameter_events",
-                                                              functools.partial(self._heard, self._on_parameter_event),
-                                                              qos_profile_parameter_events))
+                                                              functools.partial(self._heard,
+                                                                                self._on_raw_parameter_event),
+                                                              qos_profile_parameter_events, raw=True))
         self._poll_timer = self._clock.call_later(0.0, self._poll)
 
     def detach(self) -> None:
@@ -731,12 +732,13 @@ class RosBackend:
     # -- topics (executor thread) -------------------------------------------------------------------
 
     def _on_raw_transition_event(self, peer: _Peer, raw: bytes) -> None:
-        try:
-            state = _state_of(goal_state_id(raw))
-        except Exception:  # not a TransitionEvent after all: nothing to learn from it
-            log.warning("unreadable transition event from %s (%d bytes) ignored", peer.fqn, len(raw))
-            return
-        self._on_transition_event(peer, state)
+        goal = goal_state_id(raw)  # see sm_bt.ros.cdr: what the message would cost to build
+        if goal is None:
+            message = _deserialised(raw, TransitionEvent, peer.fqn)
+            if message is None:
+                return
+            goal = message.goal_state.id
+        self._on_transition_event(peer, _state_of(goal))
 
     def _on_transition_event(self, peer: _Peer, state: State) -> None:
         with self._lock:
@@ -789,13 +791,25 @@ class RosBackend:
             for peer, state in due:
                 self._dispatch(functools.partial(listener.node_state, peer.part, state))
 
-    def _on_parameter_event(self, message: ParameterEvent) -> None:
-        peer = self._by_fqn.get(message.node)
-        if peer is None:
+    def _on_raw_parameter_event(self, raw: bytes) -> None:
+        # See sm_bt.ros.cdr: another node's event costs its name only, ours no message objects.
+        node = parameter_event_node(raw)
+        if node is not None and node not in self._by_fqn:
             return
-        changed = {name: value for name, value in
-                   from_parameters(list(message.new_parameters) + list(message.changed_parameters)).items()
-                   if name in peer.parameter_names}
+        values = parameter_event_values(raw) if node is not None else None
+        if node is None or values is None:  # not plain CDR: the usual way
+            message = _deserialised(raw, ParameterEvent, "/parameter_events")
+            if message is None:
+                return
+            node = message.node
+            values = from_parameters(list(message.new_parameters) + list(message.changed_parameters))
+        peer = self._by_fqn.get(node)
+        if peer is not None:
+            self._on_parameter_event(peer, values)
+
+    def _on_parameter_event(self, peer: _Peer, values: Mapping[str, ParamValue]) -> None:
+        """``values``: what an event of ``peer`` says it now holds (new and changed parameters)."""
+        changed = {name: value for name, value in values.items() if name in peer.parameter_names}
         if not changed:
             return
         with self._lock:
@@ -1113,6 +1127,17 @@ def _echo(expected: collections.deque[tuple[Any, float]] | None, value: object, 
         expected.popleft()
         return True
     return False
+
+
+def _deserialised(raw: bytes, kind: Any, source: str) -> Any:
+    """``raw`` as a ``kind`` message, the usual way; None (and a warning) if it is not one."""
+    from rclpy.serialization import deserialize_message
+
+    try:
+        return deserialize_message(raw, kind)
+    except Exception:  # nothing to learn from it
+        log.warning("unreadable %s from %s (%d bytes) ignored", kind.__name__, source, len(raw))
+        return None
 
 
 def _discard(items: list[Any], item: object) -> None:
