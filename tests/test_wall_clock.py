@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 import weakref
 from collections.abc import Iterator
+from unittest import mock
 
 import pytest
 from engine_helpers import bundled
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
-from sm_bt.engine.clock import VirtualClock, WallClock
+from sm_bt.engine.clock import VirtualClock, WallClock, _Queue
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.sim import SimBackend
@@ -126,3 +131,80 @@ def test_a_timer_forgets_its_callback_once_run_or_cancelled() -> None:
         assert wall_ref() is None
     finally:
         wall.close()
+
+
+# -- cancelled timers do not pile up -------------------------------------------------------------------
+
+
+def test_cancelled_timers_do_not_pile_up_in_the_queue() -> None:
+    """A request's call timeouts are nearly all cancelled within milliseconds of being set; kept
+    until due (ten seconds), thousands of them filled the wall clock's heap of a busy manager."""
+    clock = WallClock()
+    try:
+        keep = clock.call_later(60.0, lambda: None)
+        for _ in range(10_000):
+            clock.call_later(10.0, lambda: None).cancel()
+        assert clock.pending() <= 2 * 64 + 1
+        keep.cancel()
+    finally:
+        clock.close()
+
+
+def test_timers_cancelled_from_another_thread_are_counted_once() -> None:
+    """Cancels race with the timer thread taking timers out: whatever the order, every live timer
+    runs once and no cancelled one runs."""
+    clock = WallClock()
+    try:
+        ran: list[int] = []
+        done = threading.Event()
+        live = [clock.call_later(0.001 * (i % 7), functools.partial(ran.append, i)) for i in range(300)]
+        doomed = [clock.call_later(0.001 * (i % 5), functools.partial(ran.append, -1 - i)) for i in range(300)]
+
+        def cancel_all() -> None:
+            for timer in doomed:
+                timer.cancel()
+                timer.cancel()  # twice: no effect
+            done.set()
+
+        threading.Thread(target=cancel_all).start()
+        assert done.wait(5.0)
+        deadline = time.monotonic() + 5.0
+        while len([r for r in ran if r >= 0]) < len(live) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert sorted(r for r in ran if r >= 0) == list(range(300))
+        # A doomed timer due before its cancel came ran; none ran twice, and none is left waiting.
+        doomed_ran = [r for r in ran if r < 0]
+        assert len(doomed_ran) == len(set(doomed_ran))
+        assert clock.pending() == 0
+    finally:
+        clock.close()
+
+
+@given(st.lists(st.tuples(st.integers(0, 50), st.integers(0, 3).map(bool), st.integers(0, 60)), max_size=400))
+@examples(300)
+def test_the_virtual_clock_runs_live_timers_in_order_and_cancelled_ones_never(
+        plan: list[tuple[int, bool, int]]) -> None:
+    """Timers (due, cancelled? (three in four), when the cancel comes) against the obvious model:
+    live timers run in due order (FIFO among equals), cancelled ones never, and the queue holds no
+    more than its live timers and the cancelled ones too few to be worth a rebuild (four here, so that
+    small examples rebuild it too)."""
+    with mock.patch.object(_Queue, "_COMPACT_FROM", 4):
+        _run_plan(plan)
+
+
+def _run_plan(plan: list[tuple[int, bool, int]]) -> None:
+    clock = VirtualClock()
+    ran: list[int] = []
+    timers = [clock.call_later(float(due), functools.partial(ran.append, i)) for i, (due, _, _) in enumerate(plan)]
+    cancels = sorted((when, i) for i, (_, cancelled, when) in enumerate(plan) if cancelled)
+    for when, i in cancels:
+        clock.run_until(float(when))
+        if plan[i][0] > when:  # not run yet: cancelled in time
+            timers[i].cancel()
+        live = sum(1 for j, (due, _, _) in enumerate(plan) if due > when and not timers[j].cancelled)
+        assert clock.pending() <= live + 2 * 4
+    clock.run_until(100.0)
+    expected = [i for i, (due, _, _) in sorted(enumerate(plan), key=lambda item: (item[1][0], item[0]))
+                if not timers[i].cancelled]
+    assert ran == expected
+    assert clock.pending() == 0

@@ -37,16 +37,28 @@ def _nothing() -> None:
 
 
 class _Timer:
-    __slots__ = ("callback", "cancelled", "due")
+    __slots__ = ("callback", "cancelled", "due", "owner")
 
     def __init__(self, due: float, callback: Callable[[], None]) -> None:
         self.due = due
         self.callback = callback
         self.cancelled = False
+        self.owner: _Queue | None = None  # the queue it waits in, told of a cancel (None once it left it)
 
     def cancel(self) -> None:
+        owner = self.owner
+        if owner is None:
+            self.drop()
+        else:
+            owner.cancel(self)
+
+    def drop(self) -> bool:
+        """Mark it cancelled; False if it already was."""
+        if self.cancelled:
+            return False
         self.cancelled = True
         self.callback = _nothing  # keeps nothing alive while it waits in the queue to be dropped
+        return True
 
     def fire(self) -> None:
         # Forget the callback first: callbacks often hold their own handle (to forget it when they
@@ -55,20 +67,91 @@ class _Timer:
         callback()
 
 
+class _Queue:
+    """The timers waiting, a heap by due time, then FIFO.
+
+    A cancelled timer stays in the heap until it comes due (removing it from the middle costs
+    O(n)), but not for long once cancelled ones are the majority: a request's call timeouts (ten
+    seconds each, one per node) are nearly all cancelled within milliseconds, and thousands of them
+    would otherwise wait in the heap, in every push and in every full garbage collection. Once over
+    half the heap is cancelled, it is rebuilt without them (amortised O(1) per timer)."""
+
+    __slots__ = ("_cancelled", "_heap", "_lock", "_sequence")
+
+    _COMPACT_FROM = 64  # cancelled timers below this are not worth a rebuild
+
+    def __init__(self, lock: threading.Lock | threading.Condition | None = None) -> None:
+        self._heap: list[tuple[float, int, _Timer]] = []
+        self._sequence = itertools.count()
+        self._cancelled = 0
+        self._lock = lock  # held while the heap changes, if timers may be cancelled from other threads
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def push(self, timer: _Timer) -> bool:
+        """Queue ``timer`` (caller holds the lock); True if it is now the earliest."""
+        timer.owner = self
+        heapq.heappush(self._heap, (timer.due, next(self._sequence), timer))
+        return self._heap[0][2] is timer
+
+    def first(self) -> _Timer | None:
+        """The earliest live timer (cancelled ones before it are dropped; caller holds the lock)."""
+        heap = self._heap
+        while heap and heap[0][2].cancelled:
+            heapq.heappop(heap)[2].owner = None
+            self._cancelled -= 1
+        return heap[0][2] if heap else None
+
+    def pop(self) -> _Timer:
+        """Take the earliest live timer out (after :meth:`first` said there is one)."""
+        timer = heapq.heappop(self._heap)[2]
+        timer.owner = None
+        return timer
+
+    def clear(self) -> None:
+        for _, _, timer in self._heap:
+            timer.owner = None
+        self._heap.clear()
+        self._cancelled = 0
+
+    def cancel(self, timer: _Timer) -> None:
+        """Cancel ``timer`` (flag and count change together, under the lock if there is one)."""
+        if self._lock is None:
+            self._cancel(timer)
+            return
+        with self._lock:
+            self._cancel(timer)
+
+    def _cancel(self, timer: _Timer) -> None:
+        if not timer.drop() or timer.owner is not self:  # cancelled before, or it left the queue
+            return
+        self._cancelled += 1
+        if self._cancelled >= self._COMPACT_FROM and 2 * self._cancelled > len(self._heap):
+            live = []
+            for entry in self._heap:
+                if entry[2].cancelled:
+                    entry[2].owner = None
+                else:
+                    live.append(entry)
+            heapq.heapify(live)
+            self._heap = live
+            self._cancelled = 0
+
+
 class VirtualClock:
     """A clock that only moves when told to; callbacks run in due-time order, then FIFO."""
 
     def __init__(self, start: float = 0.0) -> None:
         self._now = start
-        self._queue: list[tuple[float, int, _Timer]] = []
-        self._sequence = itertools.count()
+        self._queue = _Queue()
 
     def now(self) -> float:
         return self._now
 
     def call_later(self, delay: float, callback: Callable[[], None]) -> _Timer:
         timer = _Timer(self._now + max(0.0, delay), callback)
-        heapq.heappush(self._queue, (timer.due, next(self._sequence), timer))
+        self._queue.push(timer)
         return timer
 
     def advance(self, seconds: float) -> None:
@@ -79,11 +162,10 @@ class VirtualClock:
 
     def run_until(self, when: float) -> None:
         """Run callbacks due up to ``when`` (including ones they schedule), then set the time to it."""
-        while self._queue and self._queue[0][0] <= when:
-            due, _, timer = heapq.heappop(self._queue)
-            if timer.cancelled:
-                continue
-            self._now = max(self._now, due)
+        queue = self._queue
+        while (timer := queue.first()) is not None and timer.due <= when:
+            queue.pop()
+            self._now = max(self._now, timer.due)
             timer.fire()
         self._now = max(self._now, when)
 
@@ -93,9 +175,12 @@ class VirtualClock:
 
     def next_due(self) -> float | None:
         """When the next live callback is due, or ``None`` when nothing is scheduled."""
-        while self._queue and self._queue[0][2].cancelled:
-            heapq.heappop(self._queue)
-        return self._queue[0][0] if self._queue else None
+        timer = self._queue.first()
+        return None if timer is None else timer.due
+
+    def pending(self) -> int:
+        """Timers in the queue, cancelled ones not dropped yet included."""
+        return len(self._queue)
 
 
 class WallClock:
@@ -108,9 +193,8 @@ class WallClock:
     """
 
     def __init__(self, name: str = "sm_bt-clock") -> None:
-        self._queue: list[tuple[float, int, _Timer]] = []
-        self._sequence = itertools.count()
         self._condition = threading.Condition()
+        self._queue = _Queue(self._condition)
         self._closed = False
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
@@ -124,10 +208,14 @@ class WallClock:
             if self._closed:
                 timer.cancelled = True
                 return timer
-            heapq.heappush(self._queue, (timer.due, next(self._sequence), timer))
-            if self._queue[0][2] is timer:  # only a new earliest timer changes how long to sleep
+            if self._queue.push(timer):  # only a new earliest timer changes how long to sleep
                 self._condition.notify()
         return timer
+
+    def pending(self) -> int:
+        """Timers in the queue, cancelled ones not dropped yet included."""
+        with self._condition:
+            return len(self._queue)
 
     def close(self, timeout: float = 2.0) -> None:
         """Stop the timer thread (waiting up to ``timeout`` for a callback in progress)."""
@@ -142,16 +230,14 @@ class WallClock:
         while True:
             with self._condition:
                 while not self._closed:
-                    if self._queue and self._queue[0][2].cancelled:
-                        heapq.heappop(self._queue)
-                        continue
-                    wait = self._queue[0][0] - self.now() if self._queue else None
+                    first = self._queue.first()
+                    wait = first.due - self.now() if first is not None else None
                     if wait is not None and wait <= 0:
                         break
                     self._condition.wait(wait)
                 if self._closed:
                     return
-                _, _, timer = heapq.heappop(self._queue)
+                timer = self._queue.pop()
             callback = timer.callback
             try:
                 timer.fire()
