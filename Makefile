@@ -51,7 +51,7 @@ stress: $(STAMP)
 		tests/test_manager_properties.py tests/test_model_fuzz.py tests/stress_partitions.py
 
 # The performance goals (README, "Performance"): a table with each goal, build/bench/results.json
-# and build/bench/scaling.png; exit status 1 if a goal is not met. About 3.5 minutes on 2 cores.
+# and build/bench/scaling.png; exit status 1 if a goal is not met. About 3 minutes on 2 cores.
 .PHONY: bench
 bench: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
