@@ -206,7 +206,7 @@ class WallClock:
         timer = _Timer(self.now() + max(0.0, delay), callback)
         with self._condition:
             if self._closed:
-                timer.cancelled = True
+                timer.drop()
                 return timer
             if self._queue.push(timer):  # only a new earliest timer changes how long to sleep
                 self._condition.notify()
