@@ -88,8 +88,10 @@ class _Floor:
                     for n in nodes}
         self.parameter_events: list[tuple[float, str]] = []  # (receive time, node)
         self.mode_events: list[tuple[float, str]] = []  # (receive time, mode)
+        # Raw: only the node's name is read (the instrument's own work competes with the manager
+        # for this machine's two cores, so it stays small).
         self.node.create_subscription(ParameterEvent, "/parameter_events", self._on_parameters,
-                                      qos_profile_parameter_events)
+                                      qos_profile_parameter_events, raw=True)
         self.node.create_subscription(ModeEvent, f"/{SYSTEM}/mode_event", self._on_mode, 10)
         self._thread = threading.Thread(target=self.executor.spin, daemon=True, name="bench-floor")
         self._thread.start()
@@ -130,8 +132,8 @@ class _Floor:
                 break
             print(json.dumps(answer), flush=True)
 
-    def _on_parameters(self, message: Any) -> None:
-        self.parameter_events.append((time.perf_counter(), message.node))
+    def _on_parameters(self, message: bytes) -> None:
+        self.parameter_events.append((time.perf_counter(), _event_node(message)))
 
     def _on_mode(self, message: Any) -> None:
         self.mode_events.append((time.perf_counter(), message.goal_mode.label))
@@ -189,6 +191,14 @@ class _Floor:
         self.node.destroy_node()
         self.context.try_shutdown()
         self._thread.join(2.0)
+
+
+def _event_node(serialized: bytes) -> str:
+    """The ``node`` of a serialized ``rcl_interfaces/ParameterEvent``: after the encapsulation
+    header (4 bytes) and the stamp (8), a string (its length with the terminating NUL, then it)."""
+    order = "little" if serialized[1] & 1 else "big"
+    length = int.from_bytes(serialized[12:16], order)
+    return serialized[16:16 + length - 1].decode()
 
 
 class _FloorProcess:

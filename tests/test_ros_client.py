@@ -5,7 +5,7 @@ The manager runs in its own process, the pilot's nodes in another; the commands 
 and states with confirmation and its time, the modes offered, a node's own lifecycle service,
 usage errors with the closest names for parts, modes and transitions (exit 2), a change that is
 not confirmed in time (exit 1, where the part is), and no manager at all (exit 1 within the
-timeout, what to check).
+timeout, what to check), a change the manager fails (exit 1 at once, the manager's reason).
 """
 
 from __future__ import annotations
@@ -87,6 +87,49 @@ def test_a_change_not_confirmed_in_time_fails_and_says_where_the_part_is(
     code, out, err = sm_bt(capsys, "state", "set", "pilot", "configure", "--wait", "--timeout", "1")
     assert (code, out) == (1, "")
     assert re.fullmatch(r"sm-bt: error: not confirmed within 1 s: pilot is \w+, not inactive\n", err), err
+
+
+def test_a_change_the_manager_fails_ends_the_wait_at_once_with_its_reason(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """sm-bt manager tells a failure on /diagnostics: --wait ends then, not at its own timeout."""
+    manager = start_manager("--request-timeout", "1")
+    node_processes("pilot", "--transition-delay", "3")
+    manager.ready()
+    started = time.monotonic()
+    code, out, err = sm_bt(capsys, "mode", "set", "pilot", "f_normal_mode", "--wait", "--timeout", "30")
+    took = time.monotonic() - started
+    assert (code, out) == (1, "")
+    assert re.fullmatch(r"sm-bt: error: the manager says request #\d+ change_mode pilot f_normal_mode failed: .*"
+                        r"timed out.*: pilot is in mode '\(none\)', not 'f_normal_mode'\n", err), err
+    assert took < 15.0, f"the wait ended {took:.1f} s after the request, at its timeout rather than the failure"
+    assert manager.lines("change_mode pilot f_normal_mode", "failed")
+
+
+def test_only_the_failure_of_the_request_waited_for_ends_a_wait() -> None:
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from sm_bt.ros.client import _Watched
+
+    def status(part: str, last: str, outcome: str, node: bool = False) -> DiagnosticStatus:
+        values = {"last_request": last, "last_request_outcome": outcome, "last_request_reason": "timed out"}
+        if node:
+            values["reachable"] = "true"
+        return DiagnosticStatus(hardware_id=part, values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+    mode = _Watched("pilot", "change_mode pilot f_normal_mode")
+    message = DiagnosticArray(status=[status("amcl", "#3 change_mode pilot f_normal_mode", "failed", node=True),
+                                      status("pilot", "#4 change_mode pilot f_normal_mode", "running")])
+    assert mode.failures(message) == []
+    message.status[1] = status("pilot", "#4 change_mode pilot f_slow_mode", "failed")
+    assert mode.failures(message) == []
+    message.status[1] = status("pilot", "#4 change_mode pilot f_normal_mode", "failed")
+    assert mode.failures(message) == ["the manager says request #4 change_mode pilot f_normal_mode failed: timed out"]
+    # A node's own change_state service was asked: the manager's last request of that node is another one.
+    state = _Watched("amcl", "change_state amcl configure", systems_only=True)
+    assert state.failures(DiagnosticArray(status=[status("amcl", "#2 change_state amcl configure", "failed",
+                                                         node=True)])) == []
+    assert state.failures(DiagnosticArray(status=[status("amcl", "#2 change_state amcl configure", "failed")]))
 
 
 def test_with_no_manager_the_commands_say_what_to_check_within_the_timeout(

@@ -8,7 +8,10 @@ reference's ``mode_manager`` alike:
 * ``/{part}/get_state``, ``change_state`` (lifecycle_msgs): the manager's for a system, the
   node's own for a node;
 * ``/{part}/mode_event`` and ``/{part}/transition_event``: what wakes a wait for confirmation,
-  which then asks ``get_mode``/``get_state`` to be sure (a latched event may be an old one).
+  which then asks ``get_mode``/``get_state`` to be sure (a latched event may be an old one);
+* ``/diagnostics``, where ``sm-bt manager`` tells a request's failure at once: a wait ends then,
+  with the manager's reason, rather than at its timeout (the reference's manager has no such
+  signal: a wait on it ends at the confirmation or the timeout).
 
 Every call has a timeout. Names that nobody serves raise :class:`UnknownName` with the names that
 are served ("did you mean ...?"); no answer at all raises :class:`ManagerUnreachable`, saying what
@@ -21,6 +24,7 @@ from __future__ import annotations
 import difflib
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
@@ -49,7 +53,8 @@ class UnknownName(ValueError):
 
 
 class NotConfirmed(RuntimeError):
-    """A change was accepted but not confirmed in time: the message says where the part is."""
+    """A change was accepted but not confirmed in time, or the manager says it failed: the message
+    says why and where the part is."""
 
 
 def _closest(word: str, served: list[str], what: str) -> str:
@@ -183,7 +188,8 @@ class ModeClient:
 
         return self._wait(ModeEvent, f"/{part}/mode_event", lambda: self.get_mode(part) == mode, since,
                           lambda: f"{part} is in mode {self.get_mode(part) or '(none)'!r}, not {mode!r}",
-                          lambda event: bool(event.goal_mode.label == mode))
+                          lambda event: bool(event.goal_mode.label == mode),
+                          _Watched(part, f"change_mode {part} {mode}"))
 
     # -- lifecycle states ------------------------------------------------------------------------------
 
@@ -209,22 +215,31 @@ class ModeClient:
         goal = TRANSITION_GOALS[transition]
         return self._wait(TransitionEvent, f"/{part}/transition_event", lambda: self.get_state(part) == goal, since,
                           lambda: f"{part} is {self.get_state(part)}, not {goal}",
-                          lambda event: bool(event.goal_state.label == goal))
+                          lambda event: bool(event.goal_state.label == goal),
+                          # a node's own service was asked, not the manager: only a system's counts
+                          _Watched(part, f"change_state {part} {transition}", systems_only=True))
 
     # -- waiting ---------------------------------------------------------------------------------------
 
     def _wait(self, message_type: Any, topic: str, reached: Callable[[], bool], since: float,
-              where: Callable[[], str], tells: Callable[[Any], bool]) -> float:
+              where: Callable[[], str], tells: Callable[[Any], bool], request: _Watched) -> float:
         """Seconds from ``since`` until the part is there: an event that ``tells`` so (timed when it
-        arrived), or ``reached()`` asked now and then (and after any other event)."""
+        arrived), or ``reached()`` asked now and then (and after any other event); the failure of
+        ``request`` on ``/diagnostics`` ends it with :class:`NotConfirmed`."""
+        from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
         woken: list[tuple[float, Any]] = []
+        failures: list[str] = []
         # Volatile: matches a node's volatile transition_event and the manager's latched topics alike
-        # (only what comes now: the first ask below covers what was there before).
+        # (only what comes now: the first ask below covers what was there before). Made after the
+        # manager accepted the request, so every /diagnostics message heard was sent after that.
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-        subscription = self.node.create_subscription(
-            message_type, topic, lambda event: woken.append((time.monotonic(), event)), qos)
+        subscriptions = [
+            self.node.create_subscription(message_type, topic, lambda event: woken.append((time.monotonic(), event)),
+                                          qos),
+            self.node.create_subscription(DiagnosticArray, "/diagnostics",
+                                          lambda message: failures.extend(request.failures(message)), qos)]
         try:
             deadline = since + self.timeout
             next_poll = 0.0
@@ -238,8 +253,35 @@ class ModeClient:
                     next_poll = now + POLL
                     if reached():
                         return time.monotonic() - since
+                if failures:
+                    raise NotConfirmed(f"{failures[0]}: {where()}")
                 if now >= deadline:
                     raise NotConfirmed(f"not confirmed within {self.timeout:g} s: {where()}")
                 self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - now)))
         finally:
-            self.node.destroy_subscription(subscription)
+            for subscription in subscriptions:
+                self.node.destroy_subscription(subscription)
+
+
+@dataclass(frozen=True)
+class _Watched:
+    """A request waited for, as ``sm-bt manager`` describes it on ``/diagnostics``
+    (:mod:`sm_bt.ros.diagnostics`); ``systems_only``: a node's status does not count."""
+
+    part: str
+    description: str
+    systems_only: bool = False
+
+    def failures(self, message: Any) -> list[str]:
+        """What a ``DiagnosticArray`` says of this request's failure (nothing if it does not)."""
+        found = []
+        for status in message.status:
+            if status.hardware_id != self.part:
+                continue
+            values = {pair.key: pair.value for pair in status.values}
+            if self.systems_only and "reachable" in values:  # only a node's status says it
+                continue
+            last = values.get("last_request", "")  # "#12 change_mode pilot f_normal_mode"
+            if values.get("last_request_outcome") == "failed" and last.partition(" ")[2] == self.description:
+                found.append(f"the manager says request {last} failed: {values.get('last_request_reason', '')}")
+        return found
