@@ -89,31 +89,26 @@ class _TreeWatcher:
 
 
 @pytest.fixture(scope="module")
-def ros_demo() -> Iterator[tuple[int, str, Demo, float]]:
-    """One patrol cycle on ROS (shared by the tests that only read its outcome), and its wall time."""
-    started = time.monotonic()
-    code, text, demo = run_demo(ros=True, speed=SPEED, cycles=1)
-    yield code, text, demo, time.monotonic() - started
-
-
-@pytest.fixture(scope="module")
-def watched_ros_demo() -> Iterator[tuple[int, str, list[Any]]]:
-    """A ROS demo run with a plain tree watcher reading its snapshot stream meanwhile."""
+def ros_demo() -> Iterator[tuple[int, str, Demo, float, list[Any]]]:
+    """One patrol cycle on ROS (shared by the tests that only read its outcome), its wall time, and
+    what a plain tree watcher read from its snapshot stream meanwhile."""
     watcher = _TreeWatcher()
     try:
-        code, text, _ = run_demo(ros=True, speed=SPEED, cycles=1, laser_failure_at=5.0)
+        started = time.monotonic()
+        code, text, demo = run_demo(ros=True, speed=SPEED, cycles=1)
+        wall = time.monotonic() - started
     finally:
         watcher.stop()
     assert watcher.error is None, watcher.error
-    yield code, text, watcher.snapshots
+    yield code, text, demo, wall, watcher.snapshots
 
 
 def pilot_modes(demo: Demo) -> list[str]:
     return [mode for _, mode in demo.story.modes]
 
 
-def test_the_ros_demo_runs_the_mission_on_real_nodes(ros_demo: tuple[int, str, Demo, float]) -> None:
-    code, text, demo, wall = ros_demo
+def test_the_ros_demo_runs_the_mission_on_real_nodes(ros_demo: tuple[int, str, Demo, float, list[Any]]) -> None:
+    code, text, demo, wall, _ = ros_demo
     assert code == 0, text
     assert demo.root.status.value == "SUCCESS"
     assert demo.final_mode == "active.f_normal_mode"
@@ -136,8 +131,9 @@ def test_the_ros_demo_runs_the_mission_on_real_nodes(ros_demo: tuple[int, str, D
     assert wall < 40.0, f"took {wall:.1f} s"
 
 
-def test_simulated_and_ros_demos_visit_the_same_pilot_modes(ros_demo: tuple[int, str, Demo, float]) -> None:
-    _, text, ros, _ = ros_demo
+def test_simulated_and_ros_demos_visit_the_same_pilot_modes(
+        ros_demo: tuple[int, str, Demo, float, list[Any]]) -> None:
+    _, text, ros, _, _ = ros_demo
     code, sim_text, sim = run_demo(speed=0, cycles=1)
     assert code == 0, sim_text
     # The same sequence of pilot modes, ending in the same mode. This holds although the timings
@@ -202,8 +198,8 @@ def _stop(pid: int | None) -> None:
         os.kill(pid, signal.SIGKILL)
 
 
-def test_the_ros_demo_serves_its_tree_to_the_tree_watcher(watched_ros_demo: tuple[int, str, list[Any]]) -> None:
-    code, text, snapshots = watched_ros_demo
+def test_the_ros_demo_serves_its_tree_to_the_tree_watcher(ros_demo: tuple[int, str, Demo, float, list[Any]]) -> None:
+    code, text, _, _, snapshots = ros_demo
     assert code == 0, text
     assert len(snapshots) > 10, "a snapshot for every change of the tree"
     names = {behaviour.name for snapshot in snapshots for behaviour in snapshot.behaviours}
