@@ -3,7 +3,10 @@
 One child process runs 20 rclpy lifecycle nodes (``python -m sm_bt.ros.sim_nodes``) of a model
 made here: one system ``robot`` of 20 nodes, 5 parameters each, two modes that differ in all of
 them. This process holds the embedded manager (``RosRuntime``, serving the system_modes interface)
-and a plain rclpy client of its own (another context, node and executor): the floor.
+and a plain rclpy client in a process of its own: the floor. The floor's executors spin only while
+it works (its calls, or listening to a switch of the manager's for P2): the manager's answers reach
+every client of a service and would wake it, and on two cores the instrument's work competes with
+the manager's.
 
 * P1: a confirmed reconfiguration through the manager (the request is done and succeeded),
   against the same ``set_parameters_atomically``/``change_state`` calls made by the plain client
@@ -33,7 +36,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from bench.figures import Figure
 from sm_bt.engine.manager import ModeManager
@@ -63,8 +66,48 @@ def model_text(nodes: int) -> str:
     return "".join(out)
 
 
+#: How long a resting executor of the floor spins before it is used: it takes what came meanwhile
+#: (the manager's answers reach every client of a service, and wake its executor) first.
+DRAIN = 0.03
+
+
+class _Spinner:
+    """An executor spun by a thread of its own while it is awake. The floor's executors rest while
+    the manager is measured: the instrument's work competes with the manager for two cores."""
+
+    def __init__(self, executor: Any, name: str) -> None:
+        self.executor = executor
+        self._awake = threading.Event()
+        self._closed = False
+        self._thread = threading.Thread(target=self._spin, daemon=True, name=name)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while not self._closed:
+            if self._awake.is_set():
+                self.executor.spin_once(timeout_sec=0.05)
+            else:
+                self._awake.wait(0.1)
+
+    def wake(self) -> None:
+        """Spin again, and take what came while resting (callbacks run for it) before returning."""
+        self._awake.set()
+        time.sleep(DRAIN)
+
+    def rest(self) -> None:
+        self._awake.clear()
+
+    def close(self) -> None:
+        self._closed = True
+        self._awake.set()
+        self._thread.join(2.0)
+        self.executor.shutdown(timeout_sec=2.0)
+
+
 class _Floor:
-    """A plain rclpy client: calls every node at once and waits for every answer."""
+    """A plain rclpy client: calls every node at once and waits for every answer. Its calls and its
+    listening (to the nodes' and the manager's events, for P2) are two nodes with an executor each,
+    each awake only when needed."""
 
     def __init__(self, nodes: Sequence[str]) -> None:
         import rclpy
@@ -80,21 +123,22 @@ class _Floor:
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("sm_bt_bench_floor", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        self.listener = rclpy.create_node("sm_bt_bench_floor_listener", context=self.context)
+        self.calls = _Spinner(SingleThreadedExecutor(context=self.context), "bench-floor-calls")
+        self.calls.executor.add_node(self.node)
+        self.listening = _Spinner(SingleThreadedExecutor(context=self.context), "bench-floor-listener")
+        self.listening.executor.add_node(self.listener)
         self.nodes = list(nodes)
         self.change = {n: self.node.create_client(ChangeState, f"/{n}/change_state") for n in nodes}
         self.set = {n: self.node.create_client(SetParametersAtomically, f"/{n}/set_parameters_atomically")
                     for n in nodes}
         self.parameter_events: list[tuple[float, str]] = []  # (receive time, node)
         self.mode_events: list[tuple[float, str]] = []  # (receive time, mode)
-        # Raw: only the node's name is read (the instrument's own work competes with the manager
-        # for this machine's two cores, so it stays small).
-        self.node.create_subscription(ParameterEvent, "/parameter_events", self._on_parameters,
-                                      qos_profile_parameter_events, raw=True)
-        self.node.create_subscription(ModeEvent, f"/{SYSTEM}/mode_event", self._on_mode, 10)
-        self._thread = threading.Thread(target=self.executor.spin, daemon=True, name="bench-floor")
-        self._thread.start()
+        self._since = 0.0  # events stamped before this (time.time()) are old ones
+        # Raw: only the node's name and the stamp are read (the instrument's work stays small).
+        self.listener.create_subscription(ParameterEvent, "/parameter_events", self._on_parameters,
+                                          qos_profile_parameter_events, raw=True)
+        self.listener.create_subscription(ModeEvent, f"/{SYSTEM}/mode_event", self._on_mode, 10)
 
     def switch_events(self, count: int, mode: str) -> tuple[float, float]:
         """Wait for a switch's events: when the last node's (of ``count``) parameter event came,
@@ -105,6 +149,7 @@ class _Floor:
 
         try:
             _wait(published, "events of the switch", 5.0)
+            self.listening.rest()
         except RuntimeError:
             raise RuntimeError(f"events of the switch to {mode}: parameter events from "
                                f"{sorted({n for _, n in self.parameter_events})}, mode events "
@@ -121,7 +166,15 @@ class _Floor:
                 answer: object = self.transition(argument)
             elif command == "parameters":
                 answer = self.parameters(values[argument])
-            elif command == "clear":
+            elif command == "wake":
+                self.calls.wake()
+                answer = 0
+            elif command == "rest":
+                self.calls.rest()
+                answer = 0
+            elif command == "clear":  # a switch of the manager's comes: listen
+                self.listening.wake()
+                self._since = time.time()
                 self.parameter_events.clear()
                 self.mode_events.clear()
                 answer = 0
@@ -133,10 +186,13 @@ class _Floor:
             print(json.dumps(answer), flush=True)
 
     def _on_parameters(self, message: bytes) -> None:
-        self.parameter_events.append((time.perf_counter(), _event_node(message)))
+        received = time.perf_counter()
+        if _event_stamp(message) >= self._since:
+            self.parameter_events.append((received, _event_node(message)))
 
     def _on_mode(self, message: Any) -> None:
-        self.mode_events.append((time.perf_counter(), message.goal_mode.label))
+        if message.timestamp * 1e-9 >= self._since:  # ROS time in nanoseconds
+            self.mode_events.append((time.perf_counter(), message.goal_mode.label))
 
     def ready(self) -> None:
         for client in (*self.change.values(), *self.set.values()):
@@ -156,6 +212,8 @@ class _Floor:
             if remaining[0] == 0:
                 done.set()
 
+        if not self.calls._awake.is_set():
+            raise RuntimeError("the floor's calls are resting: wake them first")
         start = time.perf_counter()
         for client, request in calls:
             client.call_async(request).add_done_callback(answered)
@@ -187,18 +245,26 @@ class _Floor:
         return self._all(calls, lambda response: bool(response.result.successful))
 
     def close(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
+        self.calls.close()
+        self.listening.close()
         self.node.destroy_node()
+        self.listener.destroy_node()
         self.context.try_shutdown()
-        self._thread.join(2.0)
 
 
 def _event_node(serialized: bytes) -> str:
     """The ``node`` of a serialized ``rcl_interfaces/ParameterEvent``: after the encapsulation
     header (4 bytes) and the stamp (8), a string (its length with the terminating NUL, then it)."""
-    order = "little" if serialized[1] & 1 else "big"
+    order: Literal["little", "big"] = "little" if serialized[1] & 1 else "big"
     length = int.from_bytes(serialized[12:16], order)
     return serialized[16:16 + length - 1].decode()
+
+
+def _event_stamp(serialized: bytes) -> float:
+    """The ``stamp`` of a serialized ``ParameterEvent`` (seconds of the nodes' clock, ``time.time()``)."""
+    order: Literal["little", "big"] = "little" if serialized[1] & 1 else "big"
+    return (int.from_bytes(serialized[4:8], order, signed=True)
+            + int.from_bytes(serialized[8:12], order) * 1e-9)
 
 
 class _FloorProcess:
@@ -239,6 +305,12 @@ class _FloorProcess:
 
     def clear(self) -> None:
         self._ask("clear")
+
+    def wake(self) -> None:
+        self._ask("wake")
+
+    def rest(self) -> None:
+        self._ask("rest")
 
     def switch_events(self, count: int, mode: str) -> tuple[float, float]:
         last, system = self._ask(f"switch_events {count} {mode}")
@@ -408,6 +480,7 @@ def _p1_p2(floor: _FloorProcess, manager: ModeManager, values: dict[str, dict[st
         manager_reset()
         times["one"].append(manager_one())
         manager_reset()
+        floor.wake()
         floor_bring_up()
         floor_reset()
         times["bring_floor"].append(floor_bring_up())
@@ -415,6 +488,7 @@ def _p1_p2(floor: _FloorProcess, manager: ModeManager, values: dict[str, dict[st
         times["bring_floor"].append(floor_bring_up())
         if index != bring_ups - 1:
             floor_reset()
+        floor.rest()
 
     def manager_to(mode: str) -> None:
         floor.clear()
@@ -432,8 +506,10 @@ def _p1_p2(floor: _FloorProcess, manager: ModeManager, values: dict[str, dict[st
     for _ in range(switches):
         manager_to("FAST")
         manager_to("__DEFAULT__")
+        floor.wake()
         floor_to("FAST")
         floor_to("__DEFAULT__")
+        floor.rest()
 
     def ratio(ours: str, floor_key: str) -> tuple[float, dict[str, Any]]:
         mine, base = statistics.median(times[ours]), statistics.median(times[floor_key])
