@@ -121,11 +121,13 @@ def test_without_history_nothing_is_recorded_and_the_nodes_work_the_same() -> No
     backend.clock.advance(1.0)
     assert results == [CallResult(True), CallResult(True)]
     assert recorder.states("amcl") == [S.CONFIGURING, S.INACTIVE]
-    assert backend.events == []
+    assert backend.events == [] and backend.node("amcl").transitions == []
+    assert backend.node("amcl").state is S.INACTIVE
     with_history, _ = attached()
     with_history.change_state("amcl", T.CONFIGURE, results.append)
     with_history.clock.advance(1.0)
     assert transition_ids(with_history, "amcl") == [1, 10]
+    assert [e.goal for e in with_history.node("amcl").transitions] == [S.CONFIGURING, S.INACTIVE]
 
 
 # The backend wires OUTCOMES correctly: SimNode's hand-written truth table pins the table itself.

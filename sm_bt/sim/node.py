@@ -74,7 +74,9 @@ class SimNode:
     the clock only stamps the events.
 
     ``lifecycle=False`` makes a plain node (parameters only, no lifecycle services): it is
-    ``active`` as long as its process runs, and :meth:`start` refuses every transition.
+    ``active`` as long as its process runs, and :meth:`start` refuses every transition. With
+    ``history=False`` :attr:`transitions` stays empty (benchmarks: 40,000 events kept for a
+    bring-up of 10,000 nodes lengthened every full pass of the garbage collector).
     """
 
     def __init__(
@@ -85,6 +87,7 @@ class SimNode:
         *,
         state: State = State.UNCONFIGURED,
         lifecycle: bool = True,
+        history: bool = True,
     ) -> None:
         if not state.is_primary:
             raise ValueError(f"node {name} cannot start in {state}: a node starts in a primary state")
@@ -93,6 +96,7 @@ class SimNode:
                              f"not {state}")
         self.name = name
         self.lifecycle = lifecycle
+        self._history = history
         self._clock = clock
         self._state = state
         self._types: dict[str, str] = {}
@@ -157,7 +161,8 @@ class SimNode:
     def _move(self, transition: Transition, goal: State) -> TransitionEvent:
         event = TransitionEvent(self._clock.now(), transition, self._state, goal)
         self._state = goal
-        self.transitions.append(event)
+        if self._history:
+            self.transitions.append(event)
         return event
 
     def check_parameters(self, values: Mapping[str, ParamValue]) -> str | None:
