@@ -62,13 +62,18 @@ class DriverIO(Protocol):
     def send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None: ...
 
 
-@dataclass
+@dataclass(slots=True, eq=False)
 class _Call:
+    """A call of a driver's in flight; its bound :meth:`answered` is the backend's ``done`` (one
+    object per call: every node of a bring-up has one in flight at once)."""
+
+    driver: NodeDriver
     label: str  # what was asked, as the feedback shows it
     sent: float
     owner: Owner | None  # who it was sent for (it may have been preempted since)
     transition: Transition | None = None  # None for a parameter set
     goal: State = State.UNKNOWN  # where a transition leads on success
+    mode: str | None = None  # the mode whose values a parameter set sends
     goal_reported: bool = False  # the node reported that goal (or, for a set, parameters) meanwhile
     any_report: bool = False  # the node reported a state meanwhile
 
@@ -76,6 +81,9 @@ class _Call:
     def what(self) -> str:
         """The call itself (``activate``), without the feedback's progress."""
         return self.label if self.transition is None else self.transition.label
+
+    def answered(self, result: CallResult) -> None:
+        self.driver._call_answered(self, result)
 
 
 #: Parameter sets sent for one plan step before it fails: the node keeps reporting other values.
@@ -234,32 +242,25 @@ class NodeDriver:
 
     def _send_parameters(self, owner: Owner, mode: NodeMode) -> None:
         values = mode.values()
-        call = _Call(f"set parameters of mode {mode.name}", self.io.now(), owner)
+        call = _Call(self, f"set parameters of mode {mode.name}", self.io.now(), owner, mode=mode.name)
         self.call = call
         self._sets += 1
-
-        def done(result: CallResult) -> None:
-            if self.call is not call:
-                return
-            self.call = None
-            self._parameters_set = mode.name if result.ok and not call.goal_reported else None
-            self._answered(call, result)
-
-        self.io.send_parameters(self.node, values, done)
+        self.io.send_parameters(self.node, values, call.answered)
 
     def _send_transition(self, owner: Owner, step: Step, more: str) -> None:
-        call = _Call(step.transition.label + more, self.io.now(), owner, step.transition, step.goal)
+        call = _Call(self, step.transition.label + more, self.io.now(), owner, step.transition, step.goal)
         self.call = call
+        self.io.send_transition(self.node, step.transition, call.answered)
 
-        def done(result: CallResult) -> None:
-            if self.call is not call:
-                return
-            self.call = None
-            if result.ok and not call.goal_reported:
-                self._awaiting = call.goal
-            self._answered(call, result)
-
-        self.io.send_transition(self.node, step.transition, done)
+    def _call_answered(self, call: _Call, result: CallResult) -> None:
+        if self.call is not call:
+            return  # superseded: what it did is reported by the node
+        self.call = None
+        if call.transition is None:
+            self._parameters_set = call.mode if result.ok and not call.goal_reported else None
+        elif result.ok and not call.goal_reported:
+            self._awaiting = call.goal
+        self._answered(call, result)
 
     def _answered(self, call: _Call, result: CallResult) -> None:
         owner = self.owner

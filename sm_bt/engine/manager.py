@@ -86,6 +86,21 @@ class _Entry:
             manager._lock.release()
 
 
+class _Serialised:
+    """A backend's ``done`` for a call of the manager's: runs ``done`` inside an entry (an object,
+    not a closure: one per call in flight, and a bring-up has one for every node at once)."""
+
+    __slots__ = ("_done", "_entry")
+
+    def __init__(self, entry: _Entry, done: Done) -> None:
+        self._entry = entry
+        self._done = done
+
+    def __call__(self, result: CallResult) -> None:
+        with self._entry:
+            self._done(result)
+
+
 class ModeManager:
     """Manage the parts of ``model`` through ``backend``.
 
@@ -360,10 +375,7 @@ class ModeManager:
         self.backend.set_parameters(node, parameters, self._serialised(done))
 
     def _serialised(self, done: Done) -> Done:
-        def callback(result: CallResult) -> None:
-            with self._entry():
-                done(result)
-        return callback
+        return _Serialised(self._entered, done)
 
     # -- executions -------------------------------------------------------------------------------
 

@@ -97,6 +97,81 @@ class _Failure:
     on_error: Outcome
 
 
+_SUCCEEDS = _Failure(Outcome.SUCCESS, Outcome.SUCCESS)
+
+
+class _Callbacks:
+    """A transition's callbacks running in a node: the callback returns ``outcome`` after the
+    delay; on ERROR, error processing follows. ``finished`` gets the primary state reached.
+
+    One object per transition in flight, its steps scheduled as its bound methods: closures made
+    a dozen objects per transition, and a bring-up of 10,000 nodes has them all in flight at once
+    (the garbage collector's full passes grew with them)."""
+
+    __slots__ = ("backend", "finished", "node", "on_error", "outcome", "transition")
+
+    def __init__(self, backend: SimBackend, node: str, transition: Transition, outcome: Outcome, on_error: Outcome,
+                 finished: Callable[[State], None] | None) -> None:
+        self.backend = backend
+        self.node = node
+        self.transition = transition
+        self.outcome = outcome
+        self.on_error = on_error
+        self.finished = finished
+
+    def start(self) -> None:
+        backend = self.backend
+        backend._after(self.node, backend._delay(self.node, self.transition, backend.transition_delay), self.returned)
+
+    def returned(self) -> None:
+        backend = self.backend
+        event = backend._nodes[self.node].complete(self.outcome)
+        backend._moved(self.node, event)
+        if event.goal is State.ERRORPROCESSING:
+            backend._after(self.node, backend._delay(self.node, None, backend.error_delay), self.error_processed)
+        elif self.finished is not None:
+            self.finished(event.goal)
+
+    def error_processed(self) -> None:
+        event = self.backend._nodes[self.node].complete(self.on_error)
+        self.backend._moved(self.node, event)
+        if self.finished is not None:
+            self.finished(event.goal)
+
+
+class _Delivery:
+    """A call on its way to its node (see :class:`_Callbacks` for why an object, not a closure)."""
+
+    __slots__ = ("backend", "call", "outcome", "transition")
+
+    def __init__(self, backend: SimBackend, call: _Call, transition: Transition) -> None:
+        self.backend = backend
+        self.call = call
+        self.transition = transition
+        self.outcome = Outcome.SUCCESS
+
+    def deliver(self) -> None:
+        self.backend._deliver_transition(self)
+
+    def finished(self, final: State) -> None:
+        self.backend._respond(self.call, _transition_result(self.call.node, self.transition, self.outcome, final))
+
+
+class _NodeTimer:
+    """``action``, scheduled on behalf of a node's process (its handle in ``timers`` until it runs)."""
+
+    __slots__ = ("action", "handle", "timers")
+
+    def __init__(self, timers: set[TimerHandle], action: Callable[[], None]) -> None:
+        self.timers = timers
+        self.action = action
+        self.handle: TimerHandle | None = None
+
+    def __call__(self) -> None:
+        self.timers.discard(self.handle)  # type: ignore[arg-type]
+        self.action()
+
+
 def _format(values: Mapping[str, ParamValue]) -> str:
     return "{" + ", ".join(f"{key}: {value!r}" for key, value in values.items()) + "}"
 
@@ -241,7 +316,7 @@ class SimBackend:
         call = _Call(node, transition.label, done)
         self._record(node, EventKind.REQUEST, f"change_state {transition.label} ({int(transition)})")
         if self._accept(call):
-            self._after(node, 0.0, lambda: self._deliver_transition(call, transition))
+            self._after(node, 0.0, _Delivery(self, call, transition).deliver)
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         values = dict(parameters)
@@ -320,7 +395,7 @@ class SimBackend:
         self._record(node, EventKind.FAULT, f"{transition.label} by itself, on_{transition.label} will "
                                             f"return {outcome.name}")
         self._moved(node, event)
-        self._run_callbacks(node, transition, outcome, on_error, lambda _final: None)
+        _Callbacks(self, node, transition, outcome, on_error, None).start()
 
     def crash(self, node: str) -> None:
         """The running ``node`` stops answering at once: calls in flight and new calls get no response.
@@ -390,7 +465,8 @@ class SimBackend:
         self._clock.call_later(0.0, lambda: self._respond(call, result))
         return False
 
-    def _deliver_transition(self, call: _Call, transition: Transition) -> None:
+    def _deliver_transition(self, delivery: _Delivery) -> None:
+        call, transition = delivery.call, delivery.transition
         node = call.node
         if node in self._plain:
             # The ROS backend's wording (sm_bt.ros.backend), so that both backends read the same.
@@ -408,35 +484,11 @@ class SimBackend:
             self._hung.add(node)
             self._record(node, EventKind.FAULT, f"{transition.label} hangs in {event.goal}: no response")
             return
-        failure = self._failures.pop((node, transition), _Failure(Outcome.SUCCESS, Outcome.SUCCESS))
+        failure = self._failures.pop((node, transition), _SUCCEEDS) if self._failures else _SUCCEEDS
         if failure.outcome is not Outcome.SUCCESS:
             self._record(node, EventKind.FAULT, f"on_{transition.label} will return {failure.outcome.name}")
-
-        def finished(final: State) -> None:
-            self._respond(call, _transition_result(node, transition, failure.outcome, final))
-
-        self._run_callbacks(node, transition, failure.outcome, failure.on_error, finished)
-
-    def _run_callbacks(self, node: str, transition: Transition, outcome: Outcome, on_error: Outcome,
-                       finished: Callable[[State], None]) -> None:
-        """After the delay, the transition callback returns ``outcome``; on ERROR, error processing
-        follows (after the error delay). ``finished`` gets the primary state reached."""
-        sim = self._nodes[node]
-
-        def error_processed() -> None:
-            event = sim.complete(on_error)
-            self._moved(node, event)
-            finished(event.goal)
-
-        def callback_returned() -> None:
-            event = sim.complete(outcome)
-            self._moved(node, event)
-            if event.goal is State.ERRORPROCESSING:
-                self._after(node, self._delay(node, None, self.error_delay), error_processed)
-            else:
-                finished(event.goal)
-
-        self._after(node, self._delay(node, transition, self.transition_delay), callback_returned)
+        delivery.outcome = failure.outcome
+        _Callbacks(self, node, transition, failure.outcome, failure.on_error, delivery.finished).start()
 
     def _deliver_parameters(self, call: _Call, values: dict[str, ParamValue]) -> None:
         node = call.node
@@ -552,13 +604,9 @@ class SimBackend:
     def _after(self, node: str, delay: float, action: Callable[[], None]) -> None:
         """Schedule ``action`` on behalf of ``node``'s process, so that a crash or restart cancels it."""
         timers = self._timers[node]
-
-        def run() -> None:
-            timers.discard(handle)
-            action()
-
-        handle = self._clock.call_later(max(0.0, delay), run)
-        timers.add(handle)
+        run = _NodeTimer(timers, action)
+        run.handle = self._clock.call_later(max(0.0, delay), run)
+        timers.add(run.handle)
 
     def _cancel_timers(self, node: str) -> None:
         for handle in self._timers[node]:
