@@ -168,7 +168,7 @@ class _NodeTimer:
         self.handle: TimerHandle | None = None
 
     def __call__(self) -> None:
-        self.timers.discard(self.handle)  # type: ignore[arg-type]
+        self.timers.discard(self.handle)
         self.action()
 
 
