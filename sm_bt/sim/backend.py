@@ -108,12 +108,13 @@ class _Callbacks:
     a dozen objects per transition, and a bring-up of 10,000 nodes has them all in flight at once
     (the garbage collector's full passes grew with them)."""
 
-    __slots__ = ("backend", "finished", "node", "on_error", "outcome", "transition")
+    __slots__ = ("backend", "finished", "node", "on_error", "outcome", "sim", "transition")
 
     def __init__(self, backend: SimBackend, node: str, transition: Transition, outcome: Outcome, on_error: Outcome,
                  finished: Callable[[State], None] | None) -> None:
         self.backend = backend
         self.node = node
+        self.sim = backend._nodes[node]  # this process of the node (a restart cancels its timers)
         self.transition = transition
         self.outcome = outcome
         self.on_error = on_error
@@ -125,7 +126,7 @@ class _Callbacks:
 
     def returned(self) -> None:
         backend = self.backend
-        event = backend._nodes[self.node].complete(self.outcome)
+        event = self.sim.complete(self.outcome)
         backend._moved(self.node, event)
         if event.goal is State.ERRORPROCESSING:
             backend._after(self.node, backend._delay(self.node, None, backend.error_delay), self.error_processed)
@@ -133,7 +134,7 @@ class _Callbacks:
             self.finished(event.goal)
 
     def error_processed(self) -> None:
-        event = self.backend._nodes[self.node].complete(self.on_error)
+        event = self.sim.complete(self.on_error)
         self.backend._moved(self.node, event)
         if self.finished is not None:
             self.finished(event.goal)
