@@ -264,3 +264,21 @@ def test_a_model_may_nest_as_deep_as_the_limit_allows() -> None:
     # is far from anything a model needs.
     model = load_model_text(NODE + "          deep: " + "{a: " * 90 + "1" + "}" * 90 + "\n")
     assert model.parts["n"].modes["__DEFAULT__"].values()["deep" + ".a" * 90] == 1  # type: ignore[union-attr]
+
+
+def test_same_type_agrees_with_the_type_names() -> None:
+    from hypothesis import given
+    from hypothesis import strategies as st
+
+    from sm_bt.model.rcl_yaml import same_type, type_name
+
+    scalars = st.one_of(st.booleans(), st.integers(), st.floats(allow_nan=False), st.text(max_size=3))
+    values = st.one_of(scalars, st.lists(scalars, max_size=3).map(tuple))
+
+    @given(values, values)
+    def agrees(a: object, b: object) -> None:
+        assert same_type(a, b) == (type_name(a) == type_name(b))  # type: ignore[arg-type]
+
+    agrees()
+    assert not same_type(True, 1) and not same_type(1, 1.0) and same_type((1, 2), (3,))
+    assert not same_type((1,), (1.0,)) and not same_type((), (1,))

@@ -20,7 +20,7 @@ from sm_bt.model.match_specs import (
     read_match_map,
     value_outside,
 )
-from sm_bt.model.rcl_yaml import YMap, YNode, YScalar, YSeq, describe, type_name
+from sm_bt.model.rcl_yaml import YMap, YNode, YScalar, YSeq, describe, same_type, type_name
 from sm_bt.model.types import EXACT, Location, NodeMode, NodePart, ParamSpec, ParamValue
 
 
@@ -61,7 +61,7 @@ def build_node(decl: PartDecl, diag: Diagnostics) -> NodePart | None:
         specs: dict[str, ParamSpec] = {}
         for name, base in default.params.items():
             param = mode.params.get(name, base)
-            if type_name(param.value) != type_name(base.value):
+            if not same_type(param.value, base.value):
                 param = base  # reported by _check_delta; keep the default so later checks still run
             entry = own_match.get(name) or part_match.get(name)
             if entry is not None and value_outside(entry.match, param.value):
@@ -132,7 +132,7 @@ def _check_delta(mode: _RawMode, default: _RawMode, where: str, diag: Diagnostic
         if base is None:
             diag.error(param.line, f"{where}: parameter {name!r} is not in the default mode "
                                    f"{default.name!r}: add it to {default.name} or remove it")
-        elif type_name(param.value) != type_name(base.value):
+        elif not same_type(param.value, base.value):
             diag.error(param.line, f"{where}: parameter {name!r} is {type_name(param.value)} "
                                    f"{param.value!r} but {type_name(base.value)} in the default mode "
                                    f"(line {base.line}), and a ROS 2 node refuses a change of type: "

@@ -13,6 +13,7 @@ refused too, since one of the two values is always a mistake.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections.abc import Iterator
@@ -122,6 +123,14 @@ def type_name(value: ParamValue) -> str:
     return "string"
 
 
+def same_type(a: ParamValue, b: ParamValue) -> bool:
+    """``type_name(a) == type_name(b)``, without building the names for scalars (a model file
+    compares every parameter of every mode with its default)."""
+    if type(a) is not type(b):
+        return False
+    return not isinstance(a, tuple) or type_name(a) == type_name(b)
+
+
 class YScalar(NamedTuple):
     """A scalar: its text as written (after YAML folding), its rcl-typed value and its line.
 
@@ -163,8 +172,9 @@ class YMap:
                 return entry
         return None
 
-    @property
+    @functools.cached_property
     def keys(self) -> tuple[str, ...]:
+        # Cached: a part's modes are looked up by name for every system mode that names the part.
         return tuple(key.text for key, _ in self.entries)
 
 
@@ -308,7 +318,9 @@ class _Builder:
         # libyaml's parser makes events of exactly these classes: `type() is` is the cheap test,
         # in the order of how often they come (this loop is most of a big file's load time).
         kind = type(event)
-        line = min(event.start_mark.line + 1, self.last_line)
+        line = event.start_mark.line + 1
+        if line > self.last_line:  # libyaml's end of stream is past the last line
+            line = self.last_line
         if kind is yaml.ScalarEvent:
             if event.anchor is not None:
                 self.anchor(event, line)

@@ -119,9 +119,15 @@ class NodeMode:
     _inexact: tuple[ParamSpec, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        specs = self.parameters.values()
-        object.__setattr__(self, "_exact", tuple((s.name, s.value, type(s.value)) for s in specs if s.match == EXACT))
-        object.__setattr__(self, "_inexact", tuple(s for s in specs if s.match != EXACT))
+        exact: list[tuple[str, ParamValue, type]] = []
+        inexact: list[ParamSpec] = []
+        for spec in self.parameters.values():
+            if spec.match is EXACT or spec.match == EXACT:  # most are the shared EXACT: no __eq__
+                exact.append((spec.name, spec.value, type(spec.value)))
+            else:
+                inexact.append(spec)
+        object.__setattr__(self, "_exact", tuple(exact))
+        object.__setattr__(self, "_inexact", tuple(inexact))
 
     def values(self) -> dict[str, ParamValue]:
         """The full parameter set to send (atomically) when switching a node to this mode."""
