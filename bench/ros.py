@@ -97,6 +97,10 @@ class _Spinner:
     def rest(self) -> None:
         self._awake.clear()
 
+    @property
+    def awake(self) -> bool:
+        return self._awake.is_set()
+
     def close(self) -> None:
         self._closed = True
         self._awake.set()
@@ -212,7 +216,7 @@ class _Floor:
             if remaining[0] == 0:
                 done.set()
 
-        if not self.calls._awake.is_set():
+        if not self.calls.awake:
             raise RuntimeError("the floor's calls are resting: wake them first")
         start = time.perf_counter()
         for client, request in calls:
