@@ -42,6 +42,7 @@ from bench.figures import Figure
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodeMode
+from sm_bt.ros.cdr import parameter_event_node
 
 SYSTEM = "robot"
 P1_GOAL, P2_GOAL_MS, IDLE_GOAL, VANISH_GOAL = 1.25, 10.0, 1.0, 1.0
@@ -192,7 +193,7 @@ class _Floor:
     def _on_parameters(self, message: bytes) -> None:
         received = time.perf_counter()
         if _event_stamp(message) >= self._since:
-            self.parameter_events.append((received, _event_node(message)))
+            self.parameter_events.append((received, parameter_event_node(message) or "?"))
 
     def _on_mode(self, message: Any) -> None:
         if message.timestamp * 1e-9 >= self._since:  # ROS time in nanoseconds
@@ -256,16 +257,9 @@ class _Floor:
         self.context.try_shutdown()
 
 
-def _event_node(serialized: bytes) -> str:
-    """The ``node`` of a serialized ``rcl_interfaces/ParameterEvent``: after the encapsulation
-    header (4 bytes) and the stamp (8), a string (its length with the terminating NUL, then it)."""
-    order: Literal["little", "big"] = "little" if serialized[1] & 1 else "big"
-    length = int.from_bytes(serialized[12:16], order)
-    return serialized[16:16 + length - 1].decode()
-
-
 def _event_stamp(serialized: bytes) -> float:
-    """The ``stamp`` of a serialized ``ParameterEvent`` (seconds of the nodes' clock, ``time.time()``)."""
+    """The ``stamp`` of a serialized ``ParameterEvent``, the field before its node's name (see
+    :mod:`sm_bt.ros.cdr`): seconds of the nodes' clock, ``time.time()``."""
     order: Literal["little", "big"] = "little" if serialized[1] & 1 else "big"
     return (int.from_bytes(serialized[4:8], order, signed=True)
             + int.from_bytes(serialized[8:12], order) * 1e-9)

@@ -3,9 +3,8 @@
 Two hypothesis campaigns (strategies and oracle in ``model_fuzz``): SMH-shaped documents with
 structural damage, and byte-level mutations of the shipped and fixture models. ``make test``
 runs 500 documents and 1,500 mutated files (a document costs ten times a mutation); ``make stress``
-50,000 of each and prints the counts by outcome. A crash
-found here is kept as a plain regression test in ``test_model_robustness.py`` with its smallest
-input.
+50,000 of each and prints the counts by outcome. A crash found here is kept as a plain regression
+test in ``test_model_robustness.py`` with its smallest input.
 """
 
 from __future__ import annotations

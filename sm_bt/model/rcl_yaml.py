@@ -319,7 +319,7 @@ class _Builder:
         # in the order of how often they come (this loop is most of a big file's load time).
         kind = type(event)
         line = event.start_mark.line + 1
-        if line > self.last_line:  # libyaml's end of stream is past the last line
+        if line > self.last_line:  # a mark past the end of the text names its last line
             line = self.last_line
         if kind is yaml.ScalarEvent:
             if event.anchor is not None:

@@ -30,6 +30,7 @@ The backend is single-threaded: drive it from the thread that advances the clock
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
@@ -102,23 +103,24 @@ _SUCCEEDS = _Failure(Outcome.SUCCESS, Outcome.SUCCESS)
 
 class _Callbacks:
     """A transition's callbacks running in a node: the callback returns ``outcome`` after the
-    delay; on ERROR, error processing follows. ``finished`` gets the primary state reached.
+    delay; on ERROR, error processing follows. The primary state reached answers ``call`` (none
+    for a transition the node started by itself).
 
     One object per transition in flight, its steps scheduled as its bound methods: closures made
     a dozen objects per transition, and a bring-up of 10,000 nodes has them all in flight at once
     (the garbage collector's full passes grew with them)."""
 
-    __slots__ = ("backend", "finished", "node", "on_error", "outcome", "sim", "transition")
+    __slots__ = ("backend", "call", "node", "on_error", "outcome", "sim", "transition")
 
     def __init__(self, backend: SimBackend, node: str, transition: Transition, outcome: Outcome, on_error: Outcome,
-                 finished: Callable[[State], None] | None) -> None:
+                 call: _Call | None) -> None:
         self.backend = backend
         self.node = node
         self.sim = backend._nodes[node]  # this process of the node (a restart cancels its timers)
         self.transition = transition
         self.outcome = outcome
         self.on_error = on_error
-        self.finished = finished
+        self.call = call
 
     def start(self) -> None:
         backend = self.backend
@@ -130,32 +132,17 @@ class _Callbacks:
         backend._moved(self.node, event)
         if event.goal is State.ERRORPROCESSING:
             backend._after(self.node, backend._delay(self.node, None, backend.error_delay), self.error_processed)
-        elif self.finished is not None:
-            self.finished(event.goal)
+        else:
+            self._finished(event.goal)
 
     def error_processed(self) -> None:
         event = self.sim.complete(self.on_error)
         self.backend._moved(self.node, event)
-        if self.finished is not None:
-            self.finished(event.goal)
+        self._finished(event.goal)
 
-
-class _Delivery:
-    """A call on its way to its node (see :class:`_Callbacks` for why an object, not a closure)."""
-
-    __slots__ = ("backend", "call", "outcome", "transition")
-
-    def __init__(self, backend: SimBackend, call: _Call, transition: Transition) -> None:
-        self.backend = backend
-        self.call = call
-        self.transition = transition
-        self.outcome = Outcome.SUCCESS
-
-    def deliver(self) -> None:
-        self.backend._deliver_transition(self)
-
-    def finished(self, final: State) -> None:
-        self.backend._respond(self.call, _transition_result(self.call.node, self.transition, self.outcome, final))
+    def _finished(self, final: State) -> None:
+        if self.call is not None:
+            self.backend._respond(self.call, _transition_result(self.node, self.transition, self.outcome, final))
 
 
 class _NodeTimer:
@@ -317,7 +304,7 @@ class SimBackend:
         call = _Call(node, transition.label, done)
         self._record(node, EventKind.REQUEST, f"change_state {transition.label} ({int(transition)})")
         if self._accept(call):
-            self._after(node, 0.0, _Delivery(self, call, transition).deliver)
+            self._after(node, 0.0, functools.partial(self._deliver_transition, call, transition))
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         values = dict(parameters)
@@ -466,8 +453,7 @@ class SimBackend:
         self._clock.call_later(0.0, lambda: self._respond(call, result))
         return False
 
-    def _deliver_transition(self, delivery: _Delivery) -> None:
-        call, transition = delivery.call, delivery.transition
+    def _deliver_transition(self, call: _Call, transition: Transition) -> None:
         node = call.node
         if node in self._plain:
             # The ROS backend's wording (sm_bt.ros.backend), so that both backends read the same.
@@ -485,11 +471,10 @@ class SimBackend:
             self._hung.add(node)
             self._record(node, EventKind.FAULT, f"{transition.label} hangs in {event.goal}: no response")
             return
-        failure = self._failures.pop((node, transition), _SUCCEEDS) if self._failures else _SUCCEEDS
+        failure = self._failures.pop((node, transition), _SUCCEEDS)
         if failure.outcome is not Outcome.SUCCESS:
             self._record(node, EventKind.FAULT, f"on_{transition.label} will return {failure.outcome.name}")
-        delivery.outcome = failure.outcome
-        _Callbacks(self, node, transition, failure.outcome, failure.on_error, delivery.finished).start()
+        _Callbacks(self, node, transition, failure.outcome, failure.on_error, call).start()
 
     def _deliver_parameters(self, call: _Call, values: dict[str, ParamValue]) -> None:
         node = call.node

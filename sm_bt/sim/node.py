@@ -75,8 +75,8 @@ class SimNode:
 
     ``lifecycle=False`` makes a plain node (parameters only, no lifecycle services): it is
     ``active`` as long as its process runs, and :meth:`start` refuses every transition. With
-    ``history=False`` :attr:`transitions` stays empty (benchmarks: 40,000 events kept for a
-    bring-up of 10,000 nodes lengthened every full pass of the garbage collector).
+    ``history=False`` :attr:`transitions` stays empty (benchmarks: a bring-up of 10,000 nodes
+    would keep 40,000 events).
     """
 
     def __init__(
