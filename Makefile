@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # The interface packages (system_modes_msgs, py_trees_ros_interfaces): built (once per source hash,
-# cached under build/wheels/) and installed into the venv by tools/ensure_interfaces.sh.
+# cached under ~/.cache/sm_bt/wheels/) and installed into the venv by tools/ensure_interfaces.sh.
 ROS_IFACE_SRCS := $(wildcard interfaces/*/*.txt interfaces/*/*.toml interfaces/*/*.xml interfaces/*/msg/* \
 	interfaces/*/srv/* interfaces/*/action/*)
 
@@ -34,11 +34,12 @@ demo-ros: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
 	$(BIN)/sm-bt demo --ros
 
-test: $(STAMP)
+# The suite in PYTEST_WORKERS parallel workers (pytest-xdist), with Chromium installed while the venv
+# is built, then lint; prints the wall time of each step (tools/run_tests.sh).
+PYTEST_WORKERS ?= 6
+test:
 	@mkdir -p $(ROS_LOG_DIR)
-	bash tools/ensure_chromium.sh
-	$(BIN)/python -m pytest -q
-	$(MAKE) --no-print-directory lint
+	@MAKE="$(MAKE)" VENV="$(VENV)" STAMP="$(STAMP)" PYTEST_WORKERS="$(PYTEST_WORKERS)" bash tools/run_tests.sh
 
 # The manager's property tests (tests/test_manager_properties.py) and the loader's fuzz tests
 # (tests/test_model_fuzz.py) with the hypothesis `stress` profile: at least 10,000 scenarios and

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 from pathlib import Path
 
@@ -9,9 +10,21 @@ import pytest
 
 import sm_bt.ros.environment
 
+
+def worker_domain_id(run_domain: int, worker: int) -> int:
+    """The ROS domain of xdist worker ``worker`` in a run whose controller has ``run_domain``: the ones
+    after it in the range :func:`~sm_bt.ros.environment.run_domain_id` picks from (10..99), wrapping."""
+    return 10 + (run_domain - 10 + 1 + worker) % 90
+
+
 # Before any test starts rclpy or a ROS process (they inherit it): local discovery, this run's domain.
 # prepare() itself needs no rclpy, so this is harmless where ROS 2 is not installed.
 sm_bt.ros.environment.prepare(own_domain=True)
+# Under pytest-xdist every worker inherits the controller's domain: each takes one of its own next to
+# it, so that the nodes one worker's tests start are not seen by another's.
+if os.environ.get("PYTEST_XDIST_WORKER", "").startswith("gw"):
+    os.environ["ROS_DOMAIN_ID"] = str(worker_domain_id(int(os.environ["ROS_DOMAIN_ID"]),
+                                                        int(os.environ["PYTEST_XDIST_WORKER"][2:])))
 
 # A run started where SIGINT is ignored (a background job of a non-interactive shell) would hand
 # that on to every process it starts, and a test that stops one with SIGINT would wait in vain

@@ -12,6 +12,7 @@ from __future__ import annotations
 import atexit
 import collections
 import contextlib
+import math
 import os
 import re
 import signal
@@ -82,24 +83,37 @@ def shm_files_in_use(*, except_pid: int | None = None) -> set[Path]:
 #: Recorded when this module is first imported (by conftest or a test module): files older than the
 #: session are somebody else's and are never removed.
 SHM_AT_SESSION_START = shm_files()
+#: Seconds a Fast DDS file must have existed before it may be taken for stale.
+SHM_SETTLE = 5.0
 _live_contexts = 0
 _live_lock = threading.Lock()
 #: Every process started by this session (stopped ones included): the clean-up waits for all of them.
 _processes: weakref.WeakSet[NodeProcess] = weakref.WeakSet()
 
 
+def _mtime(path: Path) -> float:
+    try:
+        return path.stat().st_mtime
+    except OSError:  # removed meanwhile
+        return math.inf
+
+
 def remove_stale_shm_files(*, at_exit: bool = False) -> list[Path]:
     """Remove the Fast DDS files this session created that no process uses any more.
 
     Fast DDS leaves them behind after kills (and some even after clean exits). Does nothing while
-    one of our processes or a test-side context is alive; files of parallel runs are still mapped by
-    their processes and are kept. This process keeps its own port files mapped until it exits, so
+    one of our processes or a test-side context is alive; files of parallel runs (and of the other
+    xdist workers) are still mapped by their processes and are kept, and so is any file younger than
+    :data:`SHM_SETTLE` (its process may not have mapped it yet). This process keeps its own port files mapped until it exits, so
     ``at_exit`` (the interpreter is ending) also removes those.
     """
     with _live_lock:
         if _live_contexts or any(process.alive for process in list(_processes)):
             return []
-    stale = shm_files() - SHM_AT_SESSION_START
+    # A file made in the last moments may belong to a process of a parallel worker that has not mapped
+    # it yet: it is not "in use" for that instant, and removing it would cut that process off.
+    young = time.time() - SHM_SETTLE
+    stale = {path for path in shm_files() - SHM_AT_SESSION_START if _mtime(path) < young}
     if not stale:
         return []
     stale -= shm_files_in_use(except_pid=os.getpid() if at_exit else None)

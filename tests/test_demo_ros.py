@@ -88,6 +88,11 @@ class _TreeWatcher:
         self._thread.join(10.0)
 
 
+# The tests that read the one demo run below share a worker (pytest-xdist --dist loadgroup), so that it
+# runs once.
+pytestmark = pytest.mark.xdist_group("ros_demo")
+
+
 @pytest.fixture(scope="module")
 def ros_demo() -> Iterator[tuple[int, str, Demo, float, list[Any]]]:
     """One patrol cycle on ROS (shared by the tests that only read its outcome), its wall time, and

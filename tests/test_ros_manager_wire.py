@@ -60,13 +60,27 @@ def change_state(ros: RosContext, part: str, transition: int) -> bool:
     return bool(ros.call(ChangeState, f"/{part}/change_state", request, CALL_TIMEOUT).success)
 
 
+def _unanswered_is_no(ask: Callable[[], bool]) -> Callable[[], bool]:
+    """``ask`` for a polling loop: a call that gets no answer counts as "not yet". The first call of a
+    client can go unanswered when the server's reply is sent before the reply path is matched (DDS
+    discovery; seen on a loaded machine), and the next one is answered."""
+    def polled() -> bool:
+        try:
+            return ask()
+        except AssertionError:
+            return False
+    return polled
+
+
 def wait_for_pilot(ros: RosContext, state: int = StateMsg.PRIMARY_STATE_UNCONFIGURED) -> None:
     """Until the manager has found the pilot's nodes and infers the pilot in ``state``."""
-    wait_until(lambda: state_of(ros, "pilot") == state, 20.0, f"the pilot never became state {state}", poll=0.05)
+    wait_until(_unanswered_is_no(lambda: state_of(ros, "pilot") == state), 20.0,
+               f"the pilot never became state {state}", poll=0.05)
 
 
 def wait_for_mode(ros: RosContext, part: str, mode: str, timeout: float = 10.0) -> None:
-    wait_until(lambda: mode_of(ros, part) == mode, timeout, f"{part} never reached {mode}", poll=0.02)
+    wait_until(_unanswered_is_no(lambda: mode_of(ros, part) == mode), timeout, f"{part} never reached {mode}",
+               poll=0.02)
 
 
 def pairs(events: list[Any]) -> list[tuple[str, str]]:

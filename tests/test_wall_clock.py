@@ -169,9 +169,12 @@ def test_timers_cancelled_from_another_thread_run_at_most_once_and_are_counted()
 
         threading.Thread(target=cancel_all).start()
         assert done.wait(5.0)
-        deadline = time.monotonic() + 5.0
-        while len([r for r in ran if r >= 0]) < len(live) and time.monotonic() < deadline:
-            time.sleep(0.01)
+        # Due after every other timer (made last, with the longest delay): by the time it ran, the
+        # timer thread has passed every doomed timer. Without it, on a loaded machine the doomed
+        # timers (made after the live ones) can still wait in the queue when the last live one runs.
+        last = threading.Event()
+        clock.call_later(0.01, last.set)
+        assert last.wait(5.0)
         assert sorted(r for r in ran if r >= 0) == list(range(300))
         # A doomed timer due before its cancel came ran; none ran twice, and none is left waiting.
         doomed_ran = [r for r in ran if r < 0]

@@ -9,13 +9,15 @@
 # Paths for each package, fastest first:
 #   up to date  (~0.5 s)  the venv's stamp matches the source hash and every type imports and loads
 #                         its C typesupport;
-#   cached      (~1 s)    build/wheels/<package>-<hash>/ holds the wheel: pip install --no-deps it;
+#   cached      (~1 s)    $cache/wheels/<package>-<hash>/ holds the wheel: pip install --no-deps it;
 #   build       (~40 s system_modes_msgs, ~80 s py_trees_ros_interfaces) pip wheel --no-deps
 #                         (scikit-build-core + the pinned Jazzy build wheels in pip's isolated build
 #                         env; needs gcc/g++ and the package index; cmake comes from PyPI when missing).
 # <hash> covers interfaces/<package> (package.xml, CMakeLists.txt, pyproject.toml,
-# build-constraints.txt, msg/, srv/, action/) and the venv's Python version (the wheel is cp3X-specific).
-# The build log goes to build/logs/<package>-<hash>.log.
+# build-constraints.txt, msg/, srv/, action/), the venv's Python version (the wheel is cp3X-specific)
+# and the machine (uname -m). $cache is outside the checkout, as pip keeps its wheels, so that every
+# clone on a machine shares the builds: ${SM_BT_CACHE:-${XDG_CACHE_HOME:-~/.cache}/sm_bt}. An empty or
+# unwritable cache only costs a build. The build log goes to build/logs/<package>-<hash>.log.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -23,6 +25,12 @@ name="interfaces"  # for die() before a package is named
 venv="${1:-${VIRTUAL_ENV:-$root/.venv}}"
 venv="$(cd "$venv" 2>/dev/null && pwd)" || { echo "interfaces: ERROR: no venv at '${1:-${VIRTUAL_ENV:-$root/.venv}}' (create it first: make .venv/.installed)" >&2; exit 2; }
 py="$venv/bin/python"
+# Built wheels, shared by every clone on this machine; a cache that cannot be written falls back to
+# build/wheels/ in the checkout.
+wheels="${SM_BT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/sm_bt}/wheels"
+if ! mkdir -p "$wheels" 2>/dev/null || [[ ! -w "$wheels" ]]; then
+  wheels="$root/build/wheels"
+fi
 rel() { echo "${1#"$root"/}"; }
 
 # While a build runs, a line every 10 s: the time so far and the step the log shows (pip's phase,
@@ -73,7 +81,7 @@ ensure() {  # ensure <package>: the package in interfaces/<package>, built and i
     [[ -f "$f" ]] || die "$(rel "$pkg")/$f is missing"
   done
   hash="$(
-    { echo "$pyver"; for f in "${sources[@]}"; do printf '%s\0' "$f"; cat "$f"; printf '\0'; done; } \
+    { echo "$pyver $(uname -m)"; for f in "${sources[@]}"; do printf '%s\0' "$f"; cat "$f"; printf '\0'; done; } \
       | sha256sum | cut -c1-16
   )"
   cd "$root"
@@ -97,9 +105,9 @@ PY
   fi
 
   # Serialise concurrent runs (two `make` in parallel) on the wheel cache; re-check under the lock.
-  mkdir -p "$root/build/wheels" "$root/build/logs"
+  mkdir -p "$wheels" "$root/build/logs"
   if command -v flock >/dev/null 2>&1; then
-    exec 9>"$root/build/wheels/.lock"
+    exec 9>"$wheels/.lock-$name"
     flock 9
     if [[ -f "$stamp" && "$(cat "$stamp")" == "$hash" ]] && check 2>/dev/null; then
       echo "$name: up to date ($hash)"
@@ -115,7 +123,7 @@ PY
         "(make .venv/.installed does this)."
   fi
 
-  cache="$root/build/wheels/$name-$hash"
+  cache="$wheels/$name-$hash"
   whl="$(ls "$cache"/$wheel-*.whl 2>/dev/null | head -1 || true)"
 
   # --- build path --------------------------------------------------------------------------------
@@ -133,7 +141,7 @@ PY
     fi
 
     log="$root/build/logs/$name-$hash.log"
-    tmp="$root/build/wheels/.tmp-$name-$hash-$$"
+    tmp="$wheels/.tmp-$name-$hash-$$"
     rm -rf "$tmp"; mkdir -p "$tmp"
     echo "$name: building the wheel ($hash, ~$expect s on 2 cores; log: $(rel "$log")) ..."
     start=$SECONDS
@@ -210,6 +218,15 @@ PY
   echo "$name: installed $(rel "$whl") into $venv"
 }
 
+# Both at once: a cold build is mostly pip setting up its build env and CMake's single-threaded steps,
+# so the two overlap well on two cores. Each runs in a subshell of its own (its lock, its exit status).
+pids=()
 for package in system_modes_msgs py_trees_ros_interfaces; do
-  ensure "$package"
+  ensure "$package" &
+  pids+=($!)
 done
+status=0
+for pid in "${pids[@]}"; do
+  wait "$pid" || status=1
+done
+exit "$status"

@@ -164,11 +164,15 @@ def _watch(args: argparse.Namespace, model: Model, watch: _Watch, monitor: Monit
         watch.show()
         deadline = None if args.duration is None else manager.clock.now() + args.duration
         if args.ros:
+            started = time.monotonic()
             missing = watch.discover([node.name for node in model.nodes], deadline)
             if missing:
                 print(f"{PROG}: warning: not reachable after {DISCOVERY:g} s: {', '.join(missing)}",
                       file=sys.stderr)
-            served = _served_by_a_manager(graph, model) if args.change else []
+            # Discovery that was slow for the nodes (a loaded machine, a slow link) is slow for a
+            # manager's services too: look out for them at least twice as long as the nodes took.
+            lookout = max(MANAGER_LOOKOUT, 2 * (time.monotonic() - started))
+            served = _served_by_a_manager(graph, model, lookout) if args.change else []
             if served:  # two managers acting on the same nodes would undo each other's changes
                 first = args.change[0]
                 how = "state" if first.is_transition else "mode"

@@ -13,6 +13,7 @@ kept in the repository.
 from __future__ import annotations
 
 import ast
+import os
 import struct
 import subprocess
 import sys
@@ -24,8 +25,24 @@ from pathlib import Path
 WHEEL = "py-trees-js==0.7.0"
 #: Where the viewer serves them from.
 ASSETS = Path(__file__).with_name("static") / "py_trees_js"
+
+
+def _cache() -> Path:
+    """Where the downloaded wheel is kept: outside the checkout, as pip keeps its wheels, so that
+    every clone on a machine shares it (``$SM_BT_CACHE``, else ``$XDG_CACHE_HOME/sm_bt``, else
+    ``~/.cache/sm_bt``); next to the assets when that cannot be written."""
+    root = os.environ.get("SM_BT_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "sm_bt")
+    folder = Path(root) / "py-trees-js"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return ASSETS / "wheel"
+    return folder if os.access(folder, os.W_OK) else ASSETS / "wheel"
+
+
 #: Where the downloaded wheel is kept (so the assets can be checked against it).
-WHEELS = ASSETS / "wheel"
+WHEELS = _cache()
 #: The files the page needs (all that the wheel holds).
 NEEDED = ("py_trees-0.6.js", "py_trees-0.6.css", "joint-3.0.4.min.js", "joint-3.0.4.min.css", "dagre-0.8.4.min.js",
           "graphlib-2.1.7.min.js", "lodash-4.17.11.min.js", "jquery-3.4.1.min.js", "backbone-1.4.0.js")
@@ -112,8 +129,8 @@ def ensure(folder: Path = ASSETS, wheel: Path | None = None) -> bool:
 
 
 def kept_wheel() -> Path | None:
-    """The py-trees-js wheel the assets were extracted from, if it was kept."""
-    wheels = sorted(WHEELS.glob("py_trees_js-*.whl"))
+    """The pinned py-trees-js wheel the assets were extracted from, if it was kept."""
+    wheels = sorted(WHEELS.glob(f"py_trees_js-{WHEEL.split('==')[1]}-*.whl"))
     return wheels[-1] if wheels else None
 
 

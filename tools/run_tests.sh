@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# What `make test` runs: the environment (Chromium installed meanwhile), the suite in parallel
+# workers, then ruff and mypy; at the end, the wall time of each step, whatever the outcome.
+#
+#   tools/run_tests.sh [PYTEST ARGS...]     (from the Makefile: MAKE, VENV, STAMP, PYTEST_WORKERS)
+#
+# Most of the suite's time is ROS tests waiting on other processes, so it runs in more workers
+# than there are cores (pytest-xdist; each worker has a ROS domain of its own, see tests/conftest.py).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+make="${MAKE:-make}"
+venv="${VENV:-.venv}"
+stamp="${STAMP:-$venv/.installed}"
+workers="${PYTEST_WORKERS:-6}"
+start=$SECONDS
+declare -A took=([environment]=0 [tests]=0 [lint]=0)
+step="environment" since=$SECONDS
+
+next_step() {  # next_step NAME: the step so far took its time
+  took[$step]=$((SECONDS - since))
+  step="$1" since=$SECONDS
+}
+
+report() {
+  local status=$?
+  took[$step]=$((SECONDS - since))
+  echo "make test: $((SECONDS - start)) s of wall time (environment ${took[environment]} s," \
+       "tests ${took[tests]} s, lint ${took[lint]} s)$([[ $status == 0 ]] || echo "; failed in the $step step")"
+}
+trap report EXIT
+
+mkdir -p build/logs
+# Chromium (for the view's browser tests) comes from apt while pip fills the venv.
+bash tools/ensure_chromium.sh >build/logs/chromium.log 2>&1 &
+chromium=$!
+"$make" --no-print-directory "$stamp"
+if ! wait "$chromium"; then
+  cat build/logs/chromium.log >&2
+  exit 1
+fi
+cat build/logs/chromium.log
+
+next_step tests
+"$venv/bin/python" -m pytest -q -n "$workers" --dist loadgroup "$@"
+
+next_step lint
+"$make" --no-print-directory lint
