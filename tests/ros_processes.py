@@ -104,8 +104,8 @@ def remove_stale_shm_files(*, at_exit: bool = False) -> list[Path]:
     Fast DDS leaves them behind after kills (and some even after clean exits). Does nothing while
     one of our processes or a test-side context is alive; files of parallel runs (and of the other
     xdist workers) are still mapped by their processes and are kept, and so is any file younger than
-    :data:`SHM_SETTLE` (its process may not have mapped it yet). This process keeps its own port files mapped until it exits, so
-    ``at_exit`` (the interpreter is ending) also removes those.
+    :data:`SHM_SETTLE` (its process may not have mapped it yet). This process keeps its own port files
+    mapped until it exits, so ``at_exit`` (the interpreter is ending) also removes those.
     """
     with _live_lock:
         if _live_contexts or any(process.alive for process in list(_processes)):

@@ -158,7 +158,8 @@ def test_timers_cancelled_from_another_thread_run_at_most_once_and_are_counted()
     try:
         ran: list[int] = []
         done = threading.Event()
-        live = [clock.call_later(0.001 * (i % 7), functools.partial(ran.append, i)) for i in range(300)]
+        for i in range(300):
+            clock.call_later(0.001 * (i % 7), functools.partial(ran.append, i))
         doomed = [clock.call_later(0.001 * (i % 5), functools.partial(ran.append, -1 - i)) for i in range(300)]
 
         def cancel_all() -> None:
