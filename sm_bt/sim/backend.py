@@ -9,7 +9,7 @@ call; callbacks take ``transition_delay`` (``error_delay`` for ``on_error``), pa
 Faults are injected from outside (tests, demos) and each one is recorded in :attr:`SimBackend.events`:
 :meth:`~SimBackend.fail_next`, :meth:`~SimBackend.hang_next`, :meth:`~SimBackend.reject_parameters`,
 :meth:`~SimBackend.set_parameter`, :meth:`~SimBackend.trigger`, :meth:`~SimBackend.crash`,
-:meth:`~SimBackend.restart`, :meth:`~SimBackend.start_late`. Armed faults and delay overrides belong to
+:meth:`~SimBackend.vanish`, :meth:`~SimBackend.restart`, :meth:`~SimBackend.start_late`. Armed faults and delay overrides belong to
 the simulation, not to the node process: they survive a restart (:meth:`~SimBackend.clear_faults` disarms
 them). Fault methods act at once (their reports to the listener come from inside the call); only the
 Backend requests are deferred.
@@ -395,6 +395,16 @@ class SimBackend:
         self._record(node, EventKind.FAULT, "crashed: no more answers")
         self._after(node, self.vanish_after, lambda: self._vanish(node))
 
+    def vanish(self, node: str) -> None:
+        """The process of the running (or crashed) ``node`` ends, as when it exits or is killed: it is
+        reported vanished at once and its pending calls fail (ROS 2's graph shows such a node leave)."""
+        self._require(node)
+        if self._status[node] not in (NodeStatus.RUNNING, NodeStatus.CRASHED):
+            raise ValueError(f"cannot make node {node} vanish: it is {self._status[node].value}")
+        self._cancel_timers(node)
+        self._hung.discard(node)
+        self._vanish(node, "its process ended")
+
     def restart(self, node: str, state: StartState | None = None) -> None:
         """A fresh process of ``node`` (running, crashed, vanished or not yet started) starts now in
         ``state`` (default: unconfigured; a plain node always starts active) with the initial
@@ -532,9 +542,9 @@ class SimBackend:
         for call in calls:
             self._respond(call, CallResult(False, reason))
 
-    def _vanish(self, node: str) -> None:
+    def _vanish(self, node: str, why: str | None = None) -> None:
         self._status[node] = NodeStatus.VANISHED
-        reason = f"no answer for {float(self.vanish_after)} s (crashed?)"
+        reason = why if why is not None else f"no answer for {float(self.vanish_after)} s (crashed?)"
         self._record(node, EventKind.VANISHED, reason)
         if node in self._visible and self._listener is not None:
             self._visible.discard(node)
