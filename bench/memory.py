@@ -32,9 +32,8 @@ def resident_mb() -> float:
 def child(nodes: int) -> dict[str, float]:
     """Runs in the fresh interpreter: the three resident-set readings, in MB."""
     from bench.generated import model_text
-    from sm_bt.engine.manager import ModeManager
     from sm_bt.model.loader import load_model_text
-    from sm_bt.sim import SimBackend
+    from sm_bt.sim import SimulatedSystem
 
     text = model_text(nodes)
     gc.collect()
@@ -43,11 +42,10 @@ def child(nodes: int) -> dict[str, float]:
     del text
     gc.collect()
     loaded = resident_mb()
-    backend = SimBackend(model, history=False)
-    manager = ModeManager(model, backend)
+    system = SimulatedSystem(model, history=False, record=False)
     gc.collect()
     built = resident_mb()
-    assert manager.model is model
+    assert system.manager.model is model
     return {"baseline": baseline, "model": loaded - baseline, "model_and_manager": built - baseline}
 
 

@@ -27,12 +27,11 @@ from bench.figures import Figure
 from bench.generated import ROOT, model_text, shape
 from sm_bt.engine.backend import BackendListener, NodeReport
 from sm_bt.engine.inference import infer_all
-from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.loader import load_model_text
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, ParamValue
-from sm_bt.sim import SimBackend
+from sm_bt.sim import SimBackend, SimulatedSystem
 
 SIZES = (100, 250, 500, 1000, 2500, 5000, 10_000)
 QUICK_SIZES = (100, 250)
@@ -97,8 +96,9 @@ class _Rig:
         self.backend.attach = timed_attach  # type: ignore[method-assign]
         gc.collect()
         start = time.process_time()
-        self.manager = ModeManager(model, self.backend)
+        self.system = SimulatedSystem(model, backend=self.backend, record=False)
         self.construction = time.process_time() - start
+        self.manager = self.system.manager
 
     def drive(self, request: Request) -> None:
         """Run the simulation until ``request`` is done; it must have succeeded."""

@@ -23,7 +23,7 @@ from sm_bt.behaviours import ModeIs, WaitForMode
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.loader import load_model_text
 from sm_bt.model.states import State
-from sm_bt.sim import SimBackend
+from sm_bt.sim import SimulatedSystem
 
 LEAVES = 50
 GOAL = 1.3
@@ -33,8 +33,9 @@ Leaf = Callable[[int, str], py_trees.behaviour.Behaviour]
 
 def _manager() -> tuple[ModeManager, tuple[str, ...]]:
     model = load_model_text(model_text(LEAVES), "generated.yaml")
-    backend = SimBackend(model, transition_delay=0.0, parameter_delay=0.0, initial_state=State.ACTIVE, history=False)
-    return ModeManager(model, backend), shape(LEAVES)[0].nodes
+    system = SimulatedSystem(model, transition_delay=0.0, parameter_delay=0.0, initial_state=State.ACTIVE,
+                             history=False, record=False)
+    return system.manager, shape(LEAVES)[0].nodes
 
 
 def _tree(composite: Callable[[list[py_trees.behaviour.Behaviour]], py_trees.behaviour.Behaviour],

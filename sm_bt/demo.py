@@ -41,7 +41,7 @@ from sm_bt.model.loader import load_model
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart
 from sm_bt.monitor import Monitor, terminal_console
-from sm_bt.sim import SimBackend
+from sm_bt.sim import SimulatedSystem
 from sm_bt.sim.world import LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
 from sm_bt.trees.mission_xml import load_tree
@@ -148,19 +148,19 @@ class SimulatedPlatform:
     description = "simulated nodes"
 
     def __init__(self, model: Model, world: World, options: Options) -> None:
-        self.backend = SimBackend(model, transition_delay=0.2, parameter_delay=0.05,
-                                  initial_parameters=NAV2_PARAMETERS)
-        self.manager = ModeManager(model, self.backend, **MANAGER_OPTIONS)
-        self.laser = LaserDevice(world, self.backend)
+        self.system = SimulatedSystem(model, transition_delay=0.2, parameter_delay=0.05,
+                                      initial_parameters=NAV2_PARAMETERS, record=False, **MANAGER_OPTIONS)
+        self.manager = self.system.manager
+        self.laser = LaserDevice(world, self.system.backend)
         self.tick = options.tick
         self.speed = options.speed
 
     @property
     def clock(self) -> Clock:
-        return self.backend.clock
+        return self.system.clock
 
     def advance(self, seconds: float) -> None:
-        self.backend.clock.advance(seconds)
+        self.system.run(seconds)
         self.laser.update()
         if self.speed > 0:
             time.sleep(seconds / self.speed)

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import py_trees
-from harness import Harness
+from harness import Harness, settle
 from py_trees.common import Status
 
 from sm_bt.behaviours import (
@@ -33,15 +33,9 @@ DEGRADED = "f_degraded_mode"
 ENERGY_SAVING = "f_energy_saving_mode"
 
 
-def build(root: py_trees.behaviour.Behaviour, harness: Harness) -> py_trees.trees.BehaviourTree:
-    tree = py_trees.trees.BehaviourTree(root)
-    tree.setup(manager=harness.manager)
-    return tree
-
-
 def run_to_end(harness: Harness, root: py_trees.behaviour.Behaviour, limit: float = 10.0) -> Status:
-    tree = build(root, harness)
-    harness.tick_until(tree, lambda: root.status is not Status.RUNNING, limit=limit)
+    tree = harness.tree(root)
+    harness.tick_until(tree, lambda: root.status is not Status.RUNNING, timeout=limit)
     return root.status
 
 
@@ -50,7 +44,7 @@ def sequence(name: str, *children: py_trees.behaviour.Behaviour) -> py_trees.com
 
 
 def go_normal(harness: Harness) -> None:
-    harness.settle(harness.manager.change_mode(PILOT, NORMAL))
+    settle(harness, harness.manager.change_mode(PILOT, NORMAL))
 
 
 # -- scenarios -------------------------------------------------------------------------------------
@@ -120,11 +114,11 @@ def a_rejected_parameter_set_fails_the_change(harness: Harness) -> None:
 def on_divergence_reports_a_node_that_failed_by_itself(harness: Harness) -> None:
     go_normal(harness)
     check = OnDivergence("Laser diverges?", "laser_resender")
-    tree = build(check, harness)
+    tree = harness.tree(check)
     tree.tick()
     assert check.status is Status.FAILURE, "no divergence yet"
-    harness.break_node("laser_resender")
-    harness.tick_until(tree, lambda: check.status is Status.SUCCESS, limit=5.0)
+    harness.fail("laser_resender")
+    harness.tick_until(tree, lambda: check.status is Status.SUCCESS, timeout=5.0)
     divergence = py_trees.blackboard.Blackboard.get("divergence")
     assert isinstance(divergence, Divergence)
     assert divergence.part == "laser_resender"
@@ -138,9 +132,9 @@ def switch_on_divergence_changes_the_system_mode(harness: Harness) -> None:
         switch_on_divergence("Laser lost", "laser_resender", PILOT, DEGRADED),
         py_trees.behaviours.Running("Carry on"),
     ])
-    tree = build(contingencies, harness)
-    harness.break_node("laser_resender")
-    harness.tick_until(tree, lambda: str(harness.manager.actual(PILOT)) == f"active.{DEGRADED}", limit=8.0)
+    tree = harness.tree(contingencies)
+    harness.fail("laser_resender")
+    harness.tick_until(tree, lambda: str(harness.manager.actual(PILOT)) == f"active.{DEGRADED}", timeout=8.0)
     assert harness.manager.target(PILOT) == StateMode(State.ACTIVE, DEGRADED)
 
 
@@ -156,7 +150,7 @@ def hold_mode_restores_the_previous_mode(harness: Harness) -> None:
     held = hold_mode("Save energy", PILOT, ENERGY_SAVING, LookAtController("Look"))
     assert run_to_end(harness, held) is Status.SUCCESS
     assert seen == ["active.SLOW"], "the work ran while the mode was held"
-    harness.wait(lambda: str(harness.manager.actual(PILOT)) == f"active.{NORMAL}")
+    harness.run_until(lambda: str(harness.manager.actual(PILOT)) == f"active.{NORMAL}")
     assert harness.manager.target(PILOT) == StateMode(State.ACTIVE, NORMAL)
     assert str(harness.manager.actual("controller_server")) == "active.__DEFAULT__"
 

@@ -480,8 +480,7 @@ def check_load(data: bytes, path: Path) -> str:
 
 def _checked_load(data: bytes, path: Path) -> str:
     from sm_bt.cli.modes import describe_model
-    from sm_bt.engine.manager import ModeManager
-    from sm_bt.sim import SimBackend
+    from sm_bt.sim import SimulatedSystem
 
     path.write_bytes(data)
     last_line = _last_line(data)
@@ -502,7 +501,7 @@ def _checked_load(data: bytes, path: Path) -> str:
         assert isinstance(model, Model)
         for warning in model.warnings:
             assert 1 <= warning.location.line <= last_line, str(warning)
-        ModeManager(model, SimBackend(model))  # a model that loads is one a manager can run
+        SimulatedSystem(model, record=False)  # a model that loads is one a manager can run
         assert list(describe_model(model))
         outcome = "model with warnings" if model.warnings else "model"
     if elapsed > time_bound(len(data)):  # a slow moment of a shared machine, or a real cost: load again

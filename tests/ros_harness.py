@@ -12,14 +12,14 @@ from collections.abc import Callable
 from typing import Any
 
 import py_trees
-from harness import MANAGER_OPTIONS, tick_loop, wait_loop
+from harness import MANAGER_OPTIONS
 from ros_processes import NodeProcess
-from tree_helpers import Tick
 
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.requests import Request
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.ros.runtime import RosRuntime
+from sm_bt.sim import NotReached, Tick, tick_until
 
 #: Short enough that a test notices a dead node quickly, long enough for a loaded CI machine.
 BACKEND_OPTIONS: dict[str, Any] = {"call_timeout": 5.0, "acquire_timeout": 2.0, "liveness_timeout": 2.0}
@@ -36,21 +36,31 @@ class RosHarness:
                                   backend_options=BACKEND_OPTIONS)
         self.manager = self.runtime.manager
         names = [node.name for node in model.nodes]
-        self.wait(lambda: all(self.manager.observation(n).reachable for n in names), DISCOVERY_LIMIT)
+        self.run_until(lambda: all(self.manager.observation(n).reachable for n in names), DISCOVERY_LIMIT)
 
     def now(self) -> float:
         return self.manager.clock.now()
 
+    def tree(self, root: py_trees.behaviour.Behaviour) -> py_trees.trees.BehaviourTree:
+        tree = py_trees.trees.BehaviourTree(root)
+        tree.setup(manager=self.manager)
+        return tree
+
     def tick_until(self, tree: py_trees.trees.BehaviourTree, condition: Callable[[], bool], *,
-                   limit: float = 10.0, step: float = 0.05) -> list[Tick]:
-        return tick_loop(tree, self.now, time.sleep, condition, limit, step)
+                   step: float = 0.05, timeout: float = 10.0) -> list[Tick]:
+        return tick_until(tree, condition, now=self.now, advance=time.sleep, step=step, timeout=timeout)
 
-    def settle(self, request: Request, limit: float = 10.0) -> None:
-        self.wait(lambda: request.done, limit)
-        assert request.succeeded, request.reason
+    def run_until(self, condition: Callable[[], bool], timeout: float = 10.0) -> float:
+        start = self.now()
+        while not condition():
+            if self.now() - start > timeout:
+                raise NotReached(f"condition not met within {timeout:g} s")
+            time.sleep(0.01)
+        return self.now() - start
 
-    def wait(self, condition: Callable[[], bool], limit: float = 10.0) -> None:
-        wait_loop(self.now, time.sleep, condition, limit)
+    def finish(self, request: Request, timeout: float = 10.0) -> Request:
+        self.run_until(lambda: request.done, timeout)
+        return request
 
     def set_parameter(self, node: str, name: str, value: ParamValue) -> None:
         """Set one parameter of ``node`` directly (not through the manager); it must be accepted."""
@@ -63,7 +73,7 @@ class RosHarness:
     def reject_parameters(self, node: str, reason: str) -> None:
         self.set_parameter(node, "sim.reject_parameters", reason)
 
-    def break_node(self, node: str) -> None:
+    def fail(self, node: str) -> None:
         self.set_parameter(node, "sim.broken", True)
 
     def close(self) -> None:

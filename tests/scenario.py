@@ -67,7 +67,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue
-from sm_bt.sim import NodeStatus, SimBackend
+from sm_bt.sim import NodeStatus, SimBackend, SimulatedSystem
 
 #: Period of the tree's ticks, in virtual seconds.
 TICK = 0.1
@@ -444,10 +444,12 @@ class _Runner:
         self.tree: _Tree | None = None
         self.renewing: set[str] = set()  # restarted nodes whose budget renews when they appear (I6)
         _watch_appearances(self.backend, self._appeared)
-        self.manager = ModeManager(self.model, self.backend, request_timeout=options.request_timeout,
-                                   grace_period=options.grace_period, recovery_attempts=options.recovery_attempts,
-                                   recovery_window=options.recovery_window, rules=options.rules,
-                                   recovery=options.recovery)
+        self.system = SimulatedSystem(self.model, backend=self.backend, record=False,
+                                      request_timeout=options.request_timeout, grace_period=options.grace_period,
+                                      recovery_attempts=options.recovery_attempts,
+                                      recovery_window=options.recovery_window, rules=options.rules,
+                                      recovery=options.recovery)
+        self.manager = self.system.manager
         self.actuals = {name: self.manager.actual(name) for name in self.model.parts}
         self.manager.subscribe(self._on_event)
 

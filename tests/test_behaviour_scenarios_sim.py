@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator
 import pytest
 from behaviour_scenarios import SCENARIOS
 from engine_helpers import bundled
-from harness import Harness, SimHarness
+from harness import Harness, sim_harness
 from tree_helpers import fresh_blackboard
 
 
@@ -19,7 +19,7 @@ def blackboard() -> Iterator[None]:
 
 @pytest.mark.parametrize("scenario", SCENARIOS, ids=lambda s: s.__name__)
 def test_scenario(scenario: Callable[[Harness], None]) -> None:
-    harness = SimHarness(bundled("pilot"))
+    harness = sim_harness(bundled("pilot"))
     try:
         scenario(harness)
     finally:

@@ -6,13 +6,15 @@ from collections.abc import Callable, Iterator
 
 import py_trees
 import pytest
-from engine_helpers import Rig, bundled
+from engine_helpers import bundled
+from harness import settle
 from py_trees.common import Status
-from tree_helpers import Flag, backend_requests, build, fresh_blackboard, settle, tick_for, tick_until, tick_until_done
+from tree_helpers import Flag, backend_requests, fresh_blackboard
 
 from sm_bt.behaviours import ChangeMode, ChangeState, FeedbackSnapshotVisitor
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State, StateMode
+from sm_bt.sim import SimulatedSystem
 
 FAST = {"FollowPath.max_vel_x": 0.5, "FollowPath.max_speed_xy": 0.5, "FollowPath.max_vel_theta": 1.5,
         "FollowPath.transform_tolerance": 0.2}
@@ -23,8 +25,8 @@ def blackboard() -> Iterator[None]:
     yield from fresh_blackboard()
 
 
-def pilot_rig(**options: object) -> Rig:
-    return Rig(bundled("pilot"), recovery=False, **options)
+def pilot_rig(**options: object) -> SimulatedSystem:
+    return SimulatedSystem(bundled("pilot"), recovery=False, **options)
 
 
 # -- ChangeMode: progress and success ---------------------------------------------------------------
@@ -33,7 +35,7 @@ def pilot_rig(**options: object) -> Rig:
 def test_change_mode_on_a_system_reports_each_step_then_succeeds() -> None:
     rig = pilot_rig()
     change = ChangeMode("Performance", "pilot", "f_performance_mode")
-    trace = tick_until_done(build(change, rig), rig)
+    trace = rig.tick_until_done(rig.tree(change))
 
     running = [t.feedback for t in trace if t.status is Status.RUNNING]
     assert running == [
@@ -57,7 +59,7 @@ def test_change_mode_on_a_system_reports_each_step_then_succeeds() -> None:
 def test_change_mode_on_a_node() -> None:
     rig = pilot_rig()
     change = ChangeMode("Fast", "controller_server", "FAST")
-    trace = tick_until_done(build(change, rig), rig)
+    trace = rig.tick_until_done(rig.tree(change))
 
     assert [t.status for t in trace] == [Status.RUNNING, Status.RUNNING, Status.RUNNING, Status.SUCCESS]
     assert len({t.feedback for t in trace[:-1]}) > 1, "the feedback follows the steps"
@@ -72,7 +74,7 @@ def test_change_mode_accepts_the_default_mode_marker() -> None:
     rig = pilot_rig()
     settle(rig, rig.manager.change_mode("controller_server", "FAST"))
     change = ChangeMode("Default", "controller_server", "__DEFAULT__")
-    tick_until_done(build(change, rig), rig)
+    rig.tick_until_done(rig.tree(change))
     assert change.status is Status.SUCCESS
     assert rig.manager.target("controller_server") == StateMode(State.ACTIVE, "__DEFAULT__")
     assert rig.backend.node("controller_server").parameters["FollowPath.max_vel_x"] == 0.3
@@ -83,7 +85,7 @@ def test_a_part_already_in_the_mode_succeeds_in_one_tick() -> None:
     settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
     before = len(backend_requests(rig))
     change = ChangeMode("Normal", "pilot", "f_normal_mode")
-    trace = tick_until_done(build(change, rig), rig)
+    trace = rig.tick_until_done(rig.tree(change))
     assert [t.status for t in trace] == [Status.SUCCESS]
     assert len(backend_requests(rig)) == before
 
@@ -91,18 +93,18 @@ def test_a_part_already_in_the_mode_succeeds_in_one_tick() -> None:
 # -- ChangeMode: failures carry the manager's reason --------------------------------------------------
 
 
-Fault = Callable[[Rig], None]
+Fault = Callable[[SimulatedSystem], None]
 
 
-def _reject(rig: Rig) -> None:
+def _reject(rig: SimulatedSystem) -> None:
     rig.backend.reject_parameters("controller_server", "read-only")
 
 
-def _refuse_configure(rig: Rig) -> None:
+def _refuse_configure(rig: SimulatedSystem) -> None:
     rig.backend.fail_next("controller_server", Transition.CONFIGURE)
 
 
-def _hang_activate(rig: Rig) -> None:
+def _hang_activate(rig: SimulatedSystem) -> None:
     rig.backend.hang_next("controller_server", Transition.ACTIVATE)
 
 
@@ -121,7 +123,7 @@ def test_change_mode_fails_with_the_managers_reason(part: str, mode: dict[str, s
     rig = pilot_rig()
     fault(rig)
     change = ChangeMode("Change", part, mode[part], timeout=timeout)
-    trace = tick_until_done(build(change, rig), rig)
+    trace = rig.tick_until_done(rig.tree(change))
 
     assert trace[-1].status is Status.FAILURE
     assert {t.status for t in trace[:-1]} <= {Status.RUNNING}
@@ -147,7 +149,7 @@ def test_a_higher_priority_branch_taking_over_withdraws_the_change(part: str, mo
     emergency = Flag("Emergency?")
     change = ChangeMode("Change", part, mode)
     root = py_trees.composites.Selector("Root", memory=False, children=[emergency, change])
-    tree = build(root, rig)
+    tree = rig.tree(root)
     tree.tick()
     rig.clock.advance(0.02)  # configuring: no activation asked for yet
     tree.tick()
@@ -165,7 +167,7 @@ def test_a_higher_priority_branch_taking_over_withdraws_the_change(part: str, mo
     assert rig.manager.requests() == []
     assert rig.manager.target(part) is None, "the previous target (none) is back"
 
-    tick_for(tree, rig, 5.0)
+    rig.tick_for(tree, 5.0)
     assert backend_requests(rig) == sent, "no step is sent after the interruption"
     assert not any("activate" in line for line in sent)
 
@@ -173,7 +175,7 @@ def test_a_higher_priority_branch_taking_over_withdraws_the_change(part: str, mo
 def test_stopping_the_behaviour_directly_withdraws_the_change() -> None:
     rig = pilot_rig()
     change = ChangeMode("Change", "pilot", "f_normal_mode")
-    tree = build(change, rig)
+    tree = rig.tree(change)
     tree.tick()
     request = change.request
     assert request is not None and not request.done
@@ -189,8 +191,8 @@ def test_stopping_the_behaviour_directly_withdraws_the_change() -> None:
 def test_a_finished_change_is_not_cancelled_when_the_tree_moves_on() -> None:
     rig = pilot_rig()
     change = ChangeMode("Change", "pilot", "f_normal_mode")
-    tree = build(change, rig)
-    tick_until_done(tree, rig)
+    tree = rig.tree(change)
+    rig.tick_until_done(tree)
     request = change.request
     change.stop(Status.INVALID)
     assert request is not None and request.succeeded and request.reason == ""
@@ -203,12 +205,12 @@ def test_a_finished_change_is_not_cancelled_when_the_tree_moves_on() -> None:
 @pytest.mark.parametrize(("model", "part"), [("actuation", "actuation"), ("actuation", "drive_base"),
                                              ("pilot", "amcl")])
 def test_change_state_walks_the_lifecycle(model: str, part: str) -> None:
-    rig = Rig(bundled(model), recovery=False)
+    rig = SimulatedSystem(bundled(model), recovery=False)
     expected = [("configure", "inactive"), ("activate", "active.__DEFAULT__"), ("deactivate", "inactive"),
                 ("cleanup", "unconfigured"), ("shutdown", "finalized")]
     for transition, state in expected:
         change = ChangeState(transition.title(), part, transition)
-        trace = tick_until_done(build(change, rig), rig)
+        trace = rig.tick_until_done(rig.tree(change))
         assert trace[0].status is Status.RUNNING, f"{transition} takes time"
         assert trace[-1].status is Status.SUCCESS, change.feedback_message
         assert change.feedback_message.startswith(f"{part} is {state} (")
@@ -231,7 +233,7 @@ def test_change_state_rejects_an_unknown_transition_at_construction(transition: 
 def test_a_transition_invalid_from_the_current_state_fails_with_the_reason(part: str) -> None:
     rig = pilot_rig()
     change = ChangeState("Activate", part, "activate")
-    trace = tick_until_done(build(change, rig), rig)
+    trace = rig.tick_until_done(rig.tree(change))
     assert [t.status for t in trace] == [Status.FAILURE]
     assert change.feedback_message == (f"{part}: transition activate is not valid in state unconfigured "
                                        "(valid: configure, shutdown)")
@@ -244,7 +246,7 @@ def test_activate_keeps_the_last_mode() -> None:
     settle(rig, rig.manager.change_mode("pilot", "f_performance_mode"))
     for transition in ("deactivate", "activate"):
         change = ChangeState(transition.title(), "pilot", transition)
-        tick_until_done(build(change, rig), rig)
+        rig.tick_until_done(rig.tree(change))
         assert change.status is Status.SUCCESS, change.feedback_message
     assert change.feedback_message.startswith("pilot is active.f_performance_mode (")
     assert str(rig.manager.actual("pilot")) == "active.f_performance_mode"
@@ -256,8 +258,8 @@ def test_interrupting_change_state_withdraws_it() -> None:
     rig.backend.set_delay("amcl", 1.0)
     change = ChangeState("Configure", "amcl", "configure")
     root = py_trees.composites.Sequence("Task", memory=True, children=[change])
-    tree = build(root, rig)
-    tick_until(tree, rig, lambda: rig.clock.now() >= 0.5)
+    tree = rig.tree(root)
+    rig.tick_until(tree, lambda: rig.clock.now() >= 0.5)
     assert change.status is Status.RUNNING
     assert change.feedback_message == "amcl: configure"
     request = change.request
@@ -291,11 +293,11 @@ def test_each_new_step_of_a_mode_change_flags_a_snapshot_as_changed() -> None:
 def test_requests_say_who_asked_the_tree_or_the_caller() -> None:
     rig = pilot_rig()
     change = ChangeState("Configure", "pilot", "configure")
-    tree = build(change, rig)
+    tree = rig.tree(change)
     tree.tick()
     (by_tree,) = rig.manager.requests()
     assert by_tree.requester == "tree"
-    tick_until_done(tree, rig)
+    rig.tick_until_done(tree)
     assert rig.manager.change_mode("pilot", "f_normal_mode").requester == "user"
     assert rig.manager.change_mode("pilot", "f_slow_mode", requester="operator").requester == "operator"
     refused = rig.manager.change_mode("pilot", "f_nope", requester="operator")

@@ -6,9 +6,10 @@ from collections.abc import Callable, Iterator
 
 import py_trees
 import pytest
-from engine_helpers import Rig, bundled
+from engine_helpers import bundled
+from harness import settle
 from py_trees.common import Status
-from tree_helpers import build, fresh_blackboard, settle, tick_until_done
+from tree_helpers import fresh_blackboard
 
 from sm_bt.behaviours import (
     ChangeMode,
@@ -26,6 +27,7 @@ from sm_bt.behaviours import (
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State
 from sm_bt.reasoner import PILOT_DESIGNS, PILOT_OBJECTIVE, Reasoner
+from sm_bt.sim import SimulatedSystem
 
 PILOT_PARTS = "pilot, amcl, controller_server, pointcloud_to_laser, laser_resender"
 
@@ -36,12 +38,12 @@ def blackboard() -> Iterator[None]:
 
 
 @pytest.fixture
-def rig() -> Rig:
-    return Rig(bundled("pilot"), recovery=False)
+def rig() -> SimulatedSystem:
+    return SimulatedSystem(bundled("pilot"), recovery=False)
 
 
-def tick_once(behaviour: py_trees.behaviour.Behaviour, rig: Rig) -> Status:
-    tree = build(behaviour, rig)
+def tick_once(behaviour: py_trees.behaviour.Behaviour, rig: SimulatedSystem) -> Status:
+    tree = rig.tree(behaviour)
     tree.tick()
     return behaviour.status
 
@@ -49,24 +51,24 @@ def tick_once(behaviour: py_trees.behaviour.Behaviour, rig: Rig) -> Status:
 # -- ModeIs / StateIs: one tick, never RUNNING --------------------------------------------------------
 
 
-def test_mode_is_succeeds_when_the_part_is_in_the_mode(rig: Rig) -> None:
+def test_mode_is_succeeds_when_the_part_is_in_the_mode(rig: SimulatedSystem) -> None:
     settle(rig, rig.manager.change_mode("pilot", "f_performance_mode"))
     check = ModeIs("Performance?", "pilot", "f_performance_mode")
     assert tick_once(check, rig) is Status.SUCCESS
     assert check.feedback_message == "pilot is active.f_performance_mode"
 
 
-def test_mode_is_fails_with_what_the_part_is(rig: Rig) -> None:
+def test_mode_is_fails_with_what_the_part_is(rig: SimulatedSystem) -> None:
     settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
     check = ModeIs("Performance?", "pilot", "f_performance_mode")
     assert tick_once(check, rig) is Status.FAILURE
     assert check.feedback_message == "pilot is active.f_normal_mode, not active.f_performance_mode"
 
 
-def test_mode_is_does_not_wait_for_a_change_in_progress(rig: Rig) -> None:
+def test_mode_is_does_not_wait_for_a_change_in_progress(rig: SimulatedSystem) -> None:
     request = rig.manager.change_mode("pilot", "f_normal_mode")
     check = ModeIs("Normal?", "pilot", "f_normal_mode")
-    tree = build(check, rig)
+    tree = rig.tree(check)
     tree.tick()
     assert check.status is Status.FAILURE
     assert check.feedback_message == ("pilot is activating (amcl is unconfigured, f_normal_mode wants "
@@ -76,7 +78,7 @@ def test_mode_is_does_not_wait_for_a_change_in_progress(rig: Rig) -> None:
     assert check.status is Status.SUCCESS
 
 
-def test_mode_is_accepts_the_default_mode_marker(rig: Rig) -> None:
+def test_mode_is_accepts_the_default_mode_marker(rig: SimulatedSystem) -> None:
     settle(rig, rig.manager.change_state("amcl", "configure"))
     settle(rig, rig.manager.change_state("amcl", "activate"))
     check = ModeIs("Default?", "amcl", "__DEFAULT__")
@@ -86,7 +88,7 @@ def test_mode_is_accepts_the_default_mode_marker(rig: Rig) -> None:
     assert tick_once(degraded, rig) is Status.FAILURE
 
 
-def test_mode_is_explains_an_unknown_state(rig: Rig) -> None:
+def test_mode_is_explains_an_unknown_state(rig: SimulatedSystem) -> None:
     settle(rig, rig.manager.change_mode("controller_server", "FAST"))
     rig.backend.crash("controller_server")
     rig.run(1.5)
@@ -100,7 +102,7 @@ def test_mode_is_explains_an_unknown_state(rig: Rig) -> None:
     ("inactive", Status.SUCCESS), (State.INACTIVE, Status.SUCCESS), ("unconfigured", Status.FAILURE),
     (State.ACTIVE, Status.FAILURE),
 ])
-def test_state_is(rig: Rig, state: str | State, expected: Status) -> None:
+def test_state_is(rig: SimulatedSystem, state: str | State, expected: Status) -> None:
     settle(rig, rig.manager.change_state("pilot", "configure"))
     check = StateIs("State?", "pilot", state)
     assert tick_once(check, rig) is expected
@@ -117,9 +119,9 @@ def test_state_is_rejects_an_unknown_state_at_construction() -> None:
 # -- WaitForMode / WaitForState -----------------------------------------------------------------------
 
 
-def test_wait_for_mode_runs_until_the_part_gets_there(rig: Rig) -> None:
+def test_wait_for_mode_runs_until_the_part_gets_there(rig: SimulatedSystem) -> None:
     wait = WaitForMode("Wait normal", "pilot", "f_normal_mode")
-    tree = build(wait, rig)
+    tree = rig.tree(wait)
     tree.tick()
     assert wait.status is Status.RUNNING
     assert wait.feedback_message == "waiting: pilot is unconfigured, not active.f_normal_mode"
@@ -129,49 +131,49 @@ def test_wait_for_mode_runs_until_the_part_gets_there(rig: Rig) -> None:
     assert rig.manager.requests() == []
 
     rig.manager.change_mode("pilot", "f_normal_mode")
-    trace = tick_until_done(tree, rig)
+    trace = rig.tick_until_done(tree)
     assert {t.status for t in trace[:-1]} == {Status.RUNNING}
     assert trace[-1].status is Status.SUCCESS
     assert wait.feedback_message == "pilot is active.f_normal_mode"
 
 
-def test_wait_for_mode_times_out_on_the_managers_clock(rig: Rig) -> None:
+def test_wait_for_mode_times_out_on_the_managers_clock(rig: SimulatedSystem) -> None:
     rig.clock.advance(3.0)  # the timeout counts from initialise, not from the clock's origin
     wait = WaitForMode("Wait normal", "pilot", "f_normal_mode", timeout=1.0)
     # Steps that are exact binary fractions: the tick at 4.0 s is exactly 1 s after the start.
-    trace = tick_until_done(build(wait, rig), rig, step=0.125)
+    trace = rig.tick_until_done(rig.tree(wait), step=0.125)
     assert [t.status for t in trace] == [Status.RUNNING] * 8 + [Status.FAILURE]
     assert trace[-1].time == 4.0
     assert wait.feedback_message == "timed out after 1 s: pilot is unconfigured, not active.f_normal_mode"
 
 
-def test_wait_for_mode_accepts_the_default_mode_marker(rig: Rig) -> None:
+def test_wait_for_mode_accepts_the_default_mode_marker(rig: SimulatedSystem) -> None:
     wait = WaitForMode("Wait default", "controller_server", "__DEFAULT__", timeout=5.0)
-    tree = build(wait, rig)
+    tree = rig.tree(wait)
     rig.manager.change_mode("controller_server", "__DEFAULT__")
-    trace = tick_until_done(tree, rig)
+    trace = rig.tick_until_done(tree)
     assert trace[0].status is Status.RUNNING
     assert trace[-1].status is Status.SUCCESS
     assert wait.feedback_message == "controller_server is active.__DEFAULT__"
 
 
-def test_wait_for_state_runs_then_succeeds(rig: Rig) -> None:
+def test_wait_for_state_runs_then_succeeds(rig: SimulatedSystem) -> None:
     wait = WaitForState("Wait inactive", "amcl", "inactive", timeout=5.0)
-    tree = build(wait, rig)
+    tree = rig.tree(wait)
     tree.tick()
     assert wait.status is Status.RUNNING
     rig.manager.change_state("amcl", "configure")
-    trace = tick_until_done(tree, rig)
+    trace = rig.tick_until_done(tree)
     assert trace[-1].status is Status.SUCCESS
     assert trace[-1].time == pytest.approx(0.05)
     assert wait.feedback_message == "amcl is inactive"
 
 
-def test_wait_for_state_fails_after_its_timeout(rig: Rig) -> None:
+def test_wait_for_state_fails_after_its_timeout(rig: SimulatedSystem) -> None:
     rig.backend.hang_next("amcl", Transition.CONFIGURE)
     rig.manager.change_state("amcl", "configure")
     wait = WaitForState("Wait inactive", "amcl", State.INACTIVE, timeout=0.5)
-    trace = tick_until_done(build(wait, rig), rig, step=0.125)
+    trace = rig.tick_until_done(rig.tree(wait), step=0.125)
     assert [t.status for t in trace] == [Status.RUNNING] * 4 + [Status.FAILURE]
     assert trace[-1].time == 0.5
     assert wait.feedback_message == "timed out after 0.5 s: amcl is configuring, not inactive"
@@ -232,7 +234,7 @@ def test_a_manager_of_the_wrong_type_is_a_type_error() -> None:
 
 
 @pytest.mark.parametrize("factory", factories("pilto", "f_normal_mode"), ids=NAMES)
-def test_an_unknown_part_fails_at_setup_with_the_real_names(rig: Rig, factory: Factory) -> None:
+def test_an_unknown_part_fails_at_setup_with_the_real_names(rig: SimulatedSystem, factory: Factory) -> None:
     behaviour = factory()
     tree = py_trees.trees.BehaviourTree(behaviour)
     with pytest.raises(ValueError) as raised:
@@ -244,7 +246,7 @@ WITH_MODE = ["ChangeMode", "ModeIs", "WaitForMode", "HoldMode"]
 
 
 @pytest.mark.parametrize("factory", factories("pilot", "f_turbo_mode", WITH_MODE), ids=WITH_MODE)
-def test_an_unknown_mode_fails_at_setup_with_the_real_modes(rig: Rig, factory: Factory) -> None:
+def test_an_unknown_mode_fails_at_setup_with_the_real_modes(rig: SimulatedSystem, factory: Factory) -> None:
     behaviour = factory()
     tree = py_trees.trees.BehaviourTree(behaviour)
     with pytest.raises(ValueError) as raised:
@@ -254,9 +256,9 @@ def test_an_unknown_mode_fails_at_setup_with_the_real_modes(rig: Rig, factory: F
         "f_energy_saving_mode, f_normal_mode, f_performance_mode, f_slow_mode)")
 
 
-def test_setup_twice_is_harmless(rig: Rig) -> None:
+def test_setup_twice_is_harmless(rig: SimulatedSystem) -> None:
     check = ModeIs("Normal?", "pilot", "f_normal_mode")
-    tree = build(check, rig)
+    tree = rig.tree(check)
     tree.setup(manager=rig.manager)
     tree.tick()
     assert check.status is Status.FAILURE

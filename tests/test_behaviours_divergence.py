@@ -11,16 +11,18 @@ from collections.abc import Iterator
 
 import py_trees
 import pytest
-from engine_helpers import MODELS, Rig, bundled
+from engine_helpers import MODELS, bundled
+from harness import settle
 from py_trees.blackboard import Blackboard
 from py_trees.common import Status
-from tree_helpers import build, fresh_blackboard, settle, tick_for, tick_until
+from tree_helpers import fresh_blackboard
 
 from sm_bt.behaviours import ModesToBlackboard, OnDivergence, PartStatus
 from sm_bt.engine.events import Cause, Divergence
 from sm_bt.engine.lifecycle import Outcome, Transition
 from sm_bt.model.loader import load_model
 from sm_bt.model.states import State, StateMode
+from sm_bt.sim import SimulatedSystem
 
 GRACE = 2.0
 PILOT_PARTS = ("pilot", "amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
@@ -32,14 +34,14 @@ def blackboard() -> Iterator[None]:
 
 
 @pytest.fixture
-def rig() -> Rig:
+def rig() -> SimulatedSystem:
     """The pilot in f_normal_mode, recovery off."""
-    rig = Rig(bundled("pilot"), recovery=False, grace_period=GRACE)
+    rig = SimulatedSystem(bundled("pilot"), recovery=False, grace_period=GRACE)
     settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
     return rig
 
 
-def fail_laser(rig: Rig) -> float:
+def fail_laser(rig: SimulatedSystem) -> float:
     """laser_resender fails by itself; returns when."""
     rig.backend.trigger("laser_resender", Transition.DEACTIVATE, outcome=Outcome.ERROR)
     return rig.clock.now()
@@ -50,20 +52,20 @@ def fail_laser(rig: Rig) -> float:
 
 @pytest.mark.parametrize(("part", "feedback"), [(None, "every part on target"),
                                                 ("laser_resender", "laser_resender on target")])
-def test_on_target_is_failure(rig: Rig, part: str | None, feedback: str) -> None:
+def test_on_target_is_failure(rig: SimulatedSystem, part: str | None, feedback: str) -> None:
     check = OnDivergence("Diverges?", part)
-    tree = build(check, rig)
-    trace = tick_for(tree, rig, 3.0)
+    tree = rig.tree(check)
+    trace = rig.tick_for(tree, 3.0)
     assert {t.status for t in trace} == {Status.FAILURE}
     assert check.feedback_message == feedback
     assert not Blackboard.exists("/divergence")
 
 
-def test_a_node_failing_by_itself_is_reported_after_the_grace_period(rig: Rig) -> None:
+def test_a_node_failing_by_itself_is_reported_after_the_grace_period(rig: SimulatedSystem) -> None:
     check = OnDivergence("Diverges?")
-    tree = build(check, rig)
+    tree = rig.tree(check)
     failed_at = fail_laser(rig)
-    trace = tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+    trace = rig.tick_until(tree, lambda: check.status is Status.SUCCESS)
 
     during_grace = [t for t in trace if t.time < failed_at + GRACE - 1e-6]
     assert len(during_grace) == 40
@@ -82,11 +84,11 @@ def test_a_node_failing_by_itself_is_reported_after_the_grace_period(rig: Rig) -
         "laser_resender: target active.__DEFAULT__, actual unconfigured (fault) for 2.0 s (+1 more)")
 
 
-def test_watching_the_system_reports_the_system(rig: Rig) -> None:
+def test_watching_the_system_reports_the_system(rig: SimulatedSystem) -> None:
     check = OnDivergence("Pilot diverges?", "pilot")
-    tree = build(check, rig)
+    tree = rig.tree(check)
     failed_at = fail_laser(rig)
-    tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+    rig.tick_until(tree, lambda: check.status is Status.SUCCESS)
     divergence = Blackboard.get("/divergence")
     assert divergence.part == "pilot"
     assert divergence.target == StateMode(State.ACTIVE, "f_normal_mode")
@@ -96,20 +98,20 @@ def test_watching_the_system_reports_the_system(rig: Rig) -> None:
     assert "(+" not in check.feedback_message
 
 
-def test_watching_another_part_ignores_the_laser(rig: Rig) -> None:
+def test_watching_another_part_ignores_the_laser(rig: SimulatedSystem) -> None:
     check = OnDivergence("Amcl diverges?", "amcl")
-    tree = build(check, rig)
+    tree = rig.tree(check)
     fail_laser(rig)
-    trace = tick_for(tree, rig, 5.0)
+    trace = rig.tick_for(tree, 5.0)
     assert {t.status for t in trace} == {Status.FAILURE}
     assert check.feedback_message == "amcl on target"
 
 
-def test_transient_divergences_only_count_with_errors_only_false(rig: Rig) -> None:
+def test_transient_divergences_only_count_with_errors_only_false(rig: SimulatedSystem) -> None:
     strict = OnDivergence("Error?", "laser_resender", variable_name="error")
     loose = OnDivergence("Any?", "laser_resender", variable_name="any", errors_only=False)
-    tree = build(py_trees.composites.Parallel("Both", policy=py_trees.common.ParallelPolicy.SuccessOnAll(),
-                                              children=[strict, loose]), rig)
+    tree = rig.tree(py_trees.composites.Parallel("Both", policy=py_trees.common.ParallelPolicy.SuccessOnAll(),
+                                              children=[strict, loose]))
     fail_laser(rig)
     tree.tick()
     assert strict.status is Status.FAILURE
@@ -118,30 +120,30 @@ def test_transient_divergences_only_count_with_errors_only_false(rig: Rig) -> No
     assert not Blackboard.exists("/error")
 
 
-def test_no_success_while_a_request_is_in_flight(rig: Rig) -> None:
+def test_no_success_while_a_request_is_in_flight(rig: SimulatedSystem) -> None:
     check = OnDivergence("Error?")
     loose = OnDivergence("Any?", variable_name="any", errors_only=False)
-    tree = build(py_trees.composites.Parallel("Both", policy=py_trees.common.ParallelPolicy.SuccessOnAll(),
-                                              children=[check, loose]), rig)
+    tree = rig.tree(py_trees.composites.Parallel("Both", policy=py_trees.common.ParallelPolicy.SuccessOnAll(),
+                                              children=[check, loose]))
     rig.backend.hang_next("pointcloud_to_laser", Transition.ACTIVATE)
     request = rig.manager.change_mode("pilot", "f_degraded_mode", timeout=3.0)
 
-    trace = tick_for(tree, rig, 2.9, watch=check)
+    trace = rig.tick_for(tree, 2.9, watch=check)
     assert {t.status for t in trace} == {Status.FAILURE}, "the request explains the divergence"
     assert loose.status is Status.SUCCESS
     assert Blackboard.get("/any").cause is Cause.IN_FLIGHT
 
     # Once the request gave up, the divergence is an error after a new grace period.
-    trace = tick_until(tree, rig, lambda: check.status is Status.SUCCESS, watch=check)
+    trace = rig.tick_until(tree, lambda: check.status is Status.SUCCESS, watch=check)
     assert request.done and request.reason.startswith("timed out after 3 s")
     assert trace[-1].time == pytest.approx(request.finished + GRACE, abs=0.051)
 
 
-def test_the_variable_is_removed_once_the_divergence_clears(rig: Rig) -> None:
+def test_the_variable_is_removed_once_the_divergence_clears(rig: SimulatedSystem) -> None:
     check = OnDivergence("Diverges?")
-    tree = build(check, rig)
+    tree = rig.tree(check)
     fail_laser(rig)
-    tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+    rig.tick_until(tree, lambda: check.status is Status.SUCCESS)
     assert Blackboard.exists("/divergence")
 
     settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
@@ -151,18 +153,18 @@ def test_the_variable_is_removed_once_the_divergence_clears(rig: Rig) -> None:
     assert check.feedback_message == "every part on target"
 
 
-def test_the_variable_is_written_and_unset_only_when_it_changes(rig: Rig) -> None:
+def test_the_variable_is_written_and_unset_only_when_it_changes(rig: SimulatedSystem) -> None:
     """Activity views (py-trees-blackboard-watcher -a, the tree watcher) show changes, not ticks."""
     Blackboard.enable_activity_stream()
     try:
         check = OnDivergence("Diverges?")
-        tree = build(check, rig)
-        tick_for(tree, rig, 1.0)  # on target: nothing to unset, so nothing is written
+        tree = rig.tree(check)
+        rig.tick_for(tree, 1.0)  # on target: nothing to unset, so nothing is written
         fail_laser(rig)
-        tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
-        tick_for(tree, rig, 1.0)  # the same divergence, ticked on
+        rig.tick_until(tree, lambda: check.status is Status.SUCCESS)
+        rig.tick_for(tree, 1.0)  # the same divergence, ticked on
         settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
-        tick_for(tree, rig, 1.0)  # cleared once, then on target
+        rig.tick_for(tree, 1.0)  # cleared once, then on target
         assert Blackboard.activity_stream is not None
         kinds = [(item.key, item.activity_type) for item in Blackboard.activity_stream.data
                  if item.activity_type in ("WRITE", "UNSET", "INITIALISED")]
@@ -171,20 +173,20 @@ def test_the_variable_is_written_and_unset_only_when_it_changes(rig: Rig) -> Non
         Blackboard.disable_activity_stream()
 
 
-def test_a_custom_variable_name(rig: Rig) -> None:
+def test_a_custom_variable_name(rig: SimulatedSystem) -> None:
     check = OnDivergence("Laser lost?", "laser_resender", variable_name="laser/lost")
-    tree = build(check, rig)
+    tree = rig.tree(check)
     fail_laser(rig)
-    tick_until(tree, rig, lambda: check.status is Status.SUCCESS)
+    rig.tick_until(tree, lambda: check.status is Status.SUCCESS)
     assert Blackboard.get("/laser/lost").part == "laser_resender"
     assert not Blackboard.exists("/divergence")
 
 
-def test_the_blackboard_access_is_on_an_attached_client(rig: Rig) -> None:
+def test_the_blackboard_access_is_on_an_attached_client(rig: SimulatedSystem) -> None:
     check = OnDivergence("Diverges?", variable_name="problem")
     assert check.blackboards == [check.blackboard]
     assert check.blackboard.write == {"/problem"}
-    tree = build(check, rig)
+    tree = rig.tree(check)
     snapshot = py_trees.visitors.SnapshotVisitor()
     tree.add_visitor(snapshot)
     tree.tick()
@@ -196,9 +198,9 @@ def test_the_blackboard_access_is_on_an_attached_client(rig: Rig) -> None:
 
 
 def test_every_part_is_written_under_system_modes() -> None:
-    rig = Rig(bundled("pilot"), recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), recovery=False)
     writer = ModesToBlackboard()
-    tree = build(writer, rig)
+    tree = rig.tree(writer)
     tree.tick()
     assert writer.status is Status.SUCCESS
     assert writer.feedback_message == "5 part(s) changed"
@@ -208,9 +210,9 @@ def test_every_part_is_written_under_system_modes() -> None:
     assert sorted(Blackboard.keys()) == sorted(f"/system_modes/{part}" for part in PILOT_PARTS)
 
 
-def test_the_blackboard_follows_changes(rig: Rig) -> None:
+def test_the_blackboard_follows_changes(rig: SimulatedSystem) -> None:
     writer = ModesToBlackboard()
-    tree = build(writer, rig)
+    tree = rig.tree(writer)
     tree.tick()
     pilot = Blackboard.get("/system_modes/pilot")
     assert pilot == PartStatus("pilot", "active", "f_normal_mode", "active", "f_normal_mode", None)
@@ -244,10 +246,10 @@ def test_the_blackboard_follows_changes(rig: Rig) -> None:
     assert Blackboard.get("/system_modes/laser_resender").divergence is None
 
 
-def test_the_keys_are_registered_on_the_attached_client(rig: Rig) -> None:
+def test_the_keys_are_registered_on_the_attached_client(rig: SimulatedSystem) -> None:
     writer = ModesToBlackboard()
     assert writer.blackboards == [writer.blackboard]
-    tree = build(writer, rig)
+    tree = rig.tree(writer)
     assert writer.blackboard.write == {f"/system_modes/{part}" for part in PILOT_PARTS}
     snapshot = py_trees.visitors.SnapshotVisitor()
     tree.add_visitor(snapshot)
@@ -255,9 +257,9 @@ def test_the_keys_are_registered_on_the_attached_client(rig: Rig) -> None:
     assert snapshot.visited_blackboard_keys == {f"/system_modes/{part}" for part in PILOT_PARTS}
 
 
-def test_a_namespace_and_a_subset_of_parts(rig: Rig) -> None:
+def test_a_namespace_and_a_subset_of_parts(rig: SimulatedSystem) -> None:
     writer = ModesToBlackboard("Modes", namespace="/robot/modes/", parts=["pilot", "amcl"])
-    tree = build(writer, rig)
+    tree = rig.tree(writer)
     tree.tick()
     assert writer.blackboard.write == {"/robot/modes/pilot", "/robot/modes/amcl"}
     assert sorted(Blackboard.keys()) == ["/robot/modes/amcl", "/robot/modes/pilot"]
@@ -265,9 +267,9 @@ def test_a_namespace_and_a_subset_of_parts(rig: Rig) -> None:
 
 
 def test_namespaced_part_names_nest_under_the_namespace() -> None:
-    rig = Rig(load_model(MODELS / "loader_namespaced.yaml"))
+    rig = SimulatedSystem(load_model(MODELS / "loader_namespaced.yaml"))
     writer = ModesToBlackboard()
-    build(writer, rig).tick()
+    rig.tree(writer).tick()
     expected = ["/system_modes/arms", "/system_modes/left/gripper", "/system_modes/right/gripper",
                 "/system_modes/wrist"]
     assert sorted(writer.blackboard.write) == expected
@@ -275,11 +277,11 @@ def test_namespaced_part_names_nest_under_the_namespace() -> None:
     assert Blackboard.get("/system_modes/left/gripper").part == "left/gripper"
 
 
-def test_other_behaviours_can_read_it(rig: Rig) -> None:
+def test_other_behaviours_can_read_it(rig: SimulatedSystem) -> None:
     check = py_trees.behaviours.CheckBlackboardVariableValue(
         "Normal?", py_trees.common.ComparisonExpression("/system_modes/pilot.mode", "f_normal_mode", operator.eq))
     root = py_trees.composites.Sequence("Root", memory=False, children=[ModesToBlackboard(), check])
-    tree = build(root, rig)
+    tree = rig.tree(root)
     tree.tick()
     assert root.status is Status.SUCCESS
     settle(rig, rig.manager.change_mode("pilot", "f_slow_mode"))

@@ -6,19 +6,10 @@ from collections.abc import Callable, Iterator
 
 import py_trees
 import pytest
-from engine_helpers import Rig, bundled
+from engine_helpers import bundled
+from harness import settle
 from py_trees.common import Status
-from tree_helpers import (
-    Flag,
-    Probe,
-    backend_requests,
-    build,
-    fresh_blackboard,
-    settle,
-    tick_for,
-    tick_until,
-    tick_until_done,
-)
+from tree_helpers import Flag, Probe, backend_requests, fresh_blackboard
 
 from sm_bt.behaviours import (
     ChangeMode,
@@ -34,6 +25,7 @@ from sm_bt.engine.events import Event, EventKind
 from sm_bt.engine.lifecycle import Outcome, Transition
 from sm_bt.model.states import State, StateMode
 from sm_bt.reasoner import PILOT_OBJECTIVE, FunctionDesign, Reasoner, pilot_reasoner
+from sm_bt.sim import SimulatedSystem
 
 NORMAL = StateMode(State.ACTIVE, "f_normal_mode")
 PERFORMANCE = StateMode(State.ACTIVE, "f_performance_mode")
@@ -51,14 +43,14 @@ def blackboard() -> Iterator[None]:
 
 
 @pytest.fixture
-def rig() -> Rig:
+def rig() -> SimulatedSystem:
     """The pilot in f_normal_mode, recovery off (the tree handles the contingencies)."""
-    rig = Rig(bundled("pilot"), recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), recovery=False)
     settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
     return rig
 
 
-def pilot_mode(rig: Rig) -> str:
+def pilot_mode(rig: SimulatedSystem) -> str:
     return str(rig.manager.actual("pilot"))
 
 
@@ -71,11 +63,11 @@ def held(subtree: py_trees.behaviour.Behaviour) -> HoldMode:
 # -- hold_mode ----------------------------------------------------------------------------------------
 
 
-def test_the_work_starts_once_the_mode_is_confirmed_and_the_mode_is_restored_after(rig: Rig) -> None:
+def test_the_work_starts_once_the_mode_is_confirmed_and_the_mode_is_restored_after(rig: SimulatedSystem) -> None:
     work = Probe("Sprint", [Status.RUNNING, Status.RUNNING, Status.SUCCESS], look=lambda: pilot_mode(rig))
     subtree = hold_mode("Fast", "pilot", "f_performance_mode", work)
-    tree = build(subtree, rig)
-    trace = tick_until_done(tree, rig)
+    tree = rig.tree(subtree)
+    trace = rig.tick_until_done(tree)
 
     assert subtree.status is Status.SUCCESS
     assert work.seen == ["active.f_performance_mode"] * 3, "the work only ever saw the held mode"
@@ -91,10 +83,10 @@ def test_the_work_starts_once_the_mode_is_confirmed_and_the_mode_is_restored_aft
     assert rig.backend.node("controller_server").parameters == DEFAULT_CONTROLLER
 
 
-def test_the_mode_is_restored_when_the_work_fails(rig: Rig) -> None:
+def test_the_mode_is_restored_when_the_work_fails(rig: SimulatedSystem) -> None:
     work = Probe("Sprint", [Status.RUNNING, Status.FAILURE], look=lambda: pilot_mode(rig))
     subtree = hold_mode("Fast", "pilot", "f_performance_mode", work)
-    tick_until_done(build(subtree, rig), rig)
+    rig.tick_until_done(rig.tree(subtree))
 
     assert subtree.status is Status.FAILURE
     assert work.seen == ["active.f_performance_mode"] * 2
@@ -104,13 +96,13 @@ def test_the_mode_is_restored_when_the_work_fails(rig: Rig) -> None:
     assert pilot_mode(rig) == "active.f_normal_mode"
 
 
-def test_the_mode_is_restored_when_the_parent_interrupts_the_work(rig: Rig) -> None:
+def test_the_mode_is_restored_when_the_parent_interrupts_the_work(rig: SimulatedSystem) -> None:
     stop = Flag("Stop?")
     work = Probe("Sprint", [Status.RUNNING], look=lambda: pilot_mode(rig))
     subtree = hold_mode("Fast", "pilot", "f_performance_mode", work)
     root = py_trees.composites.Selector("Root", memory=False, children=[stop, subtree])
-    tree = build(root, rig)
-    tick_for(tree, rig, 0.5)
+    tree = rig.tree(root)
+    rig.tick_for(tree, 0.5)
     hold = held(subtree)
     assert hold.status is Status.RUNNING
     assert hold.feedback_message == "holding pilot in active.f_performance_mode"
@@ -126,14 +118,14 @@ def test_the_mode_is_restored_when_the_parent_interrupts_the_work(rig: Rig) -> N
     assert pilot_mode(rig) == "active.f_normal_mode"
 
 
-def test_interrupted_before_the_mode_is_reached_the_change_is_withdrawn(rig: Rig) -> None:
+def test_interrupted_before_the_mode_is_reached_the_change_is_withdrawn(rig: SimulatedSystem) -> None:
     rig.backend.hang_next("pointcloud_to_laser", Transition.ACTIVATE)
     stop = Flag("Stop?")
     work = Probe("Careful", [Status.RUNNING])
     subtree = hold_mode("Degraded", "pilot", "f_degraded_mode", work)
     root = py_trees.composites.Selector("Root", memory=False, children=[stop, subtree])
-    tree = build(root, rig)
-    tick_for(tree, rig, 0.5)
+    tree = rig.tree(root)
+    rig.tick_for(tree, 0.5)
     hold = held(subtree)
     change = hold.restore_request
     assert change is None
@@ -147,17 +139,17 @@ def test_interrupted_before_the_mode_is_reached_the_change_is_withdrawn(rig: Rig
     assert rig.manager.target("pilot") == NORMAL
 
 
-def test_nothing_is_restored_when_someone_else_retargeted_the_part(rig: Rig) -> None:
+def test_nothing_is_restored_when_someone_else_retargeted_the_part(rig: SimulatedSystem) -> None:
     work = Probe("Sprint", [Status.RUNNING] * 10 + [Status.SUCCESS])
     subtree = hold_mode("Fast", "pilot", "f_performance_mode", work)
-    tree = build(subtree, rig)
-    tick_until(tree, rig, lambda: len(work.seen) == 2)
+    tree = rig.tree(subtree)
+    rig.tick_until(tree, lambda: len(work.seen) == 2)
     slow = rig.manager.change_mode("pilot", "f_slow_mode")
     tree.tick()
     assert held(subtree).feedback_message == ("pilot was re-targeted to active.f_slow_mode: "
                                               "it will not be restored")
 
-    tick_until_done(tree, rig)
+    rig.tick_until_done(tree)
     assert subtree.status is Status.SUCCESS
     assert held(subtree).restore_request is None
     assert slow.succeeded and slow.reason == ""
@@ -166,11 +158,11 @@ def test_nothing_is_restored_when_someone_else_retargeted_the_part(rig: Rig) -> 
     assert pilot_mode(rig) == "active.f_slow_mode"
 
 
-def test_failure_when_the_held_mode_cannot_be_reached(rig: Rig) -> None:
+def test_failure_when_the_held_mode_cannot_be_reached(rig: SimulatedSystem) -> None:
     rig.backend.reject_parameters("controller_server", "read-only")
     work = Probe("Sprint", [Status.SUCCESS])
     subtree = hold_mode("Fast", "pilot", "f_performance_mode", work)
-    tick_until_done(build(subtree, rig), rig)
+    rig.tick_until_done(rig.tree(subtree))
 
     assert subtree.status is Status.FAILURE
     assert work.seen == [], "the work never ran"
@@ -186,7 +178,8 @@ def test_failure_when_the_held_mode_cannot_be_reached(rig: Rig) -> None:
     assert pilot_mode(rig) == "active.f_normal_mode"
 
 
-def test_the_mode_lost_before_the_work_starts_fails_the_subtree_instead_of_waiting_for_ever(rig: Rig) -> None:
+def test_the_mode_lost_before_the_work_starts_fails_the_subtree_instead_of_waiting_for_ever(
+        rig: SimulatedSystem) -> None:
     # The change succeeds between two ticks, and the laser fails before the next tick: the work
     # must not wait (without a bound) for a mode that nothing brings back (recovery is off).
     def fail_laser_once_held(event: Event) -> None:
@@ -197,7 +190,7 @@ def test_the_mode_lost_before_the_work_starts_fails_the_subtree_instead_of_waiti
     rig.manager.subscribe(fail_laser_once_held, kinds=[EventKind.REQUEST])
     work = Probe("Work", [Status.SUCCESS])
     subtree = hold_mode("Save energy", "pilot", "f_energy_saving_mode", work)
-    trace = tick_until_done(build(subtree, rig), rig, limit=5.0)
+    trace = rig.tick_until_done(rig.tree(subtree), timeout=5.0)
     assert trace[-1].status is Status.FAILURE
     assert work.seen == [], "the work never ran"
     gate = subtree.children[1].children[0]
@@ -217,10 +210,10 @@ def test_an_empty_mode_name_is_refused_when_the_behaviour_is_made(make: Callable
         make()
 
 
-def test_holding_the_mode_the_part_is_in_restores_nothing(rig: Rig) -> None:
+def test_holding_the_mode_the_part_is_in_restores_nothing(rig: SimulatedSystem) -> None:
     work = Probe("Cruise", [Status.SUCCESS])
     subtree = hold_mode("Normal", "pilot", "f_normal_mode", work)
-    tick_until_done(build(subtree, rig), rig)
+    rig.tick_until_done(rig.tree(subtree))
     assert subtree.status is Status.SUCCESS
     assert work.seen == [None]
     assert held(subtree).restore_request is None
@@ -230,11 +223,11 @@ def test_holding_the_mode_the_part_is_in_restores_nothing(rig: Rig) -> None:
 # -- switch_on_divergence -----------------------------------------------------------------------------
 
 
-def test_laser_failure_switches_the_pilot_to_degraded(rig: Rig) -> None:
+def test_laser_failure_switches_the_pilot_to_degraded(rig: SimulatedSystem) -> None:
     navigate = Probe("Navigate", [Status.RUNNING])
     switch = switch_on_divergence("Laser lost", "laser_resender", "pilot", "f_degraded_mode")
     root = py_trees.composites.Selector("Contingencies", memory=False, children=[switch, navigate])
-    tree = build(root, rig)
+    tree = rig.tree(root)
     detector, change = switch.children
     assert isinstance(detector, OnDivergence) and isinstance(change, ChangeMode)
 
@@ -246,11 +239,11 @@ def test_laser_failure_switches_the_pilot_to_degraded(rig: Rig) -> None:
             during_switch.append(rig.manager.divergence("laser_resender") is not None)
 
     tree.add_post_tick_handler(watch)
-    tick_for(tree, rig, 0.5)
+    rig.tick_for(tree, 0.5)
     ticks_before = len(navigate.seen)
     failed_at = rig.clock.now()
     rig.backend.trigger("laser_resender", Transition.DEACTIVATE, outcome=Outcome.ERROR)
-    tick_until(tree, rig, lambda: switch.status is Status.SUCCESS, watch=switch)
+    rig.tick_until(tree, lambda: switch.status is Status.SUCCESS, watch=switch)
 
     request = change.request
     assert request is not None and request.succeeded and request.reason == ""
@@ -274,10 +267,10 @@ def test_laser_failure_switches_the_pilot_to_degraded(rig: Rig) -> None:
     assert navigate.status is Status.RUNNING
 
 
-def test_switch_on_divergence_fails_when_nothing_diverges(rig: Rig) -> None:
+def test_switch_on_divergence_fails_when_nothing_diverges(rig: SimulatedSystem) -> None:
     switch = switch_on_divergence("Any failure", None, "pilot", "f_degraded_mode")
-    tree = build(switch, rig)
-    trace = tick_for(tree, rig, 3.0)
+    tree = rig.tree(switch)
+    trace = rig.tick_for(tree, 3.0)
     assert {t.status for t in trace} == {Status.FAILURE}
     assert pilot_mode(rig) == "active.f_normal_mode"
     assert rig.manager.requests() == []
@@ -287,9 +280,9 @@ def test_switch_on_divergence_fails_when_nothing_diverges(rig: Rig) -> None:
 
 
 def test_reconfigure_picks_normal_mode_at_start() -> None:
-    rig = Rig(bundled("pilot"), recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), recovery=False)
     reconfigure = Reconfigure("Reconfigure", pilot_reasoner())
-    trace = tick_until_done(build(reconfigure, rig), rig)
+    trace = rig.tick_until_done(rig.tree(reconfigure))
     assert trace[0].status is Status.RUNNING
     assert trace[-1].status is Status.SUCCESS
     assert reconfigure.decision_text == ("all components OK: f_normal_mode has the best performance (0.7) of the "
@@ -298,12 +291,12 @@ def test_reconfigure_picks_normal_mode_at_start() -> None:
     assert pilot_mode(rig) == "active.f_normal_mode"
 
 
-def test_reconfigure_degrades_when_the_laser_failed(rig: Rig) -> None:
+def test_reconfigure_degrades_when_the_laser_failed(rig: SimulatedSystem) -> None:
     reasoner = pilot_reasoner()
     reconfigure = Reconfigure("Reconfigure", reasoner)
-    tree = build(reconfigure, rig)
+    tree = rig.tree(reconfigure)
     reasoner.component_failed("laser_resender")
-    trace = tick_until_done(tree, rig)
+    trace = rig.tick_until_done(tree)
     assert trace[0].status is Status.RUNNING
     assert trace[-1].status is Status.SUCCESS
     assert reconfigure.decision_text == "laser_resender failed: f_degraded_mode is the only realisable design"
@@ -311,13 +304,13 @@ def test_reconfigure_degrades_when_the_laser_failed(rig: Rig) -> None:
     assert rig.backend.node("laser_resender").state is State.UNCONFIGURED
 
 
-def test_reconfigure_fails_with_the_explanation_when_nothing_is_realisable(rig: Rig) -> None:
+def test_reconfigure_fails_with_the_explanation_when_nothing_is_realisable(rig: SimulatedSystem) -> None:
     reasoner = pilot_reasoner()
     reasoner.component_failed("battery")
     reasoner.component_failed("laser_resender")
     reconfigure = Reconfigure("Reconfigure", reasoner)
     before = backend_requests(rig)
-    trace = tick_until_done(build(reconfigure, rig), rig)
+    trace = rig.tick_until_done(rig.tree(reconfigure))
     assert [t.status for t in trace] == [Status.FAILURE]
     assert reconfigure.feedback_message == "battery, laser_resender failed: no design of pilot is realisable"
     assert reconfigure.request is None
@@ -326,11 +319,11 @@ def test_reconfigure_fails_with_the_explanation_when_nothing_is_realisable(rig: 
     assert rig.manager.target("pilot") == NORMAL
 
 
-def test_reconfigure_with_nothing_to_do_succeeds_at_once(rig: Rig) -> None:
+def test_reconfigure_with_nothing_to_do_succeeds_at_once(rig: SimulatedSystem) -> None:
     reasoner = pilot_reasoner()
     reconfigure = Reconfigure("Reconfigure", reasoner)
     before = backend_requests(rig)
-    trace = tick_until_done(build(reconfigure, rig), rig)
+    trace = rig.tick_until_done(rig.tree(reconfigure))
     assert [t.status for t in trace] == [Status.SUCCESS]
     assert reconfigure.request is None
     assert reconfigure.feedback_message == reasoner.last_decision.explanation
@@ -339,13 +332,13 @@ def test_reconfigure_with_nothing_to_do_succeeds_at_once(rig: Rig) -> None:
     assert not reasoner.changed
 
 
-def test_interrupting_reconfigure_withdraws_the_change(rig: Rig) -> None:
+def test_interrupting_reconfigure_withdraws_the_change(rig: SimulatedSystem) -> None:
     rig.backend.hang_next("pointcloud_to_laser", Transition.ACTIVATE)
     reasoner = pilot_reasoner()
     reasoner.component_failed("laser_resender")
     reconfigure = Reconfigure("Reconfigure", reasoner)
-    tree = build(reconfigure, rig)
-    tick_for(tree, rig, 0.5)
+    tree = rig.tree(reconfigure)
+    rig.tick_for(tree, 0.5)
     request = reconfigure.request
     assert request is not None and not request.done
     reconfigure.stop(Status.INVALID)
@@ -354,14 +347,14 @@ def test_interrupting_reconfigure_withdraws_the_change(rig: Rig) -> None:
     assert rig.manager.target("pilot") == NORMAL
 
 
-def test_reconfigure_checks_the_reasoner_against_the_model_at_setup(rig: Rig) -> None:
+def test_reconfigure_checks_the_reasoner_against_the_model_at_setup(rig: SimulatedSystem) -> None:
     design = FunctionDesign("f_turbo_mode", frozenset({"battery"}),
                             {"energy": 0.1, "performance": 1.0, "safety": 0.9})
     reconfigure = Reconfigure("Reconfigure", Reasoner("pilot", [design], PILOT_OBJECTIVE))
     with pytest.raises(ValueError, match=r"^Reconfigure/Reconfigure: designs of pilot name modes the model lacks: "
                                          r"f_turbo_mode \(modes of pilot: "):
-        build(reconfigure, rig)
+        rig.tree(reconfigure)
 
-    other = Rig(bundled("actuation"))
+    other = SimulatedSystem(bundled("actuation"))
     with pytest.raises(ValueError, match=r"unknown part 'pilot' \(parts: actuation, manipulator, drive_base\)"):
-        build(Reconfigure("Reconfigure", pilot_reasoner()), other)
+        other.tree(Reconfigure("Reconfigure", pilot_reasoner()))

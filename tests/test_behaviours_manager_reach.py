@@ -9,12 +9,13 @@ from collections.abc import Iterator
 
 import py_trees
 import pytest
-from engine_helpers import Rig, bundled
+from engine_helpers import bundled
 from py_trees.common import Status
-from tree_helpers import fresh_blackboard, tick_until
+from tree_helpers import fresh_blackboard
 
 from sm_bt.behaviours import ChangeMode, ModeIs, NotSetUp, OnDivergence, attach_manager, hold_mode
 from sm_bt.model.states import State
+from sm_bt.sim import SimulatedSystem
 
 
 @pytest.fixture(autouse=True)
@@ -23,8 +24,8 @@ def blackboard() -> Iterator[None]:
 
 
 @pytest.fixture
-def rig() -> Rig:
-    return Rig(bundled("pilot"), recovery=False)
+def rig() -> SimulatedSystem:
+    return SimulatedSystem(bundled("pilot"), recovery=False)
 
 
 class _NoKwargsTree(py_trees.trees.BehaviourTree):
@@ -34,15 +35,16 @@ class _NoKwargsTree(py_trees.trees.BehaviourTree):
         super().setup(timeout=timeout)
 
 
-def test_a_behaviour_given_its_manager_needs_no_setup_kwargs(rig: Rig) -> None:
+def test_a_behaviour_given_its_manager_needs_no_setup_kwargs(rig: SimulatedSystem) -> None:
     tree = _NoKwargsTree(ChangeMode("Normal", "pilot", "f_normal_mode", manager=rig.manager))
     tree.setup()
-    trace = tick_until(tree, rig, lambda: tree.root.status is Status.SUCCESS)
+    trace = rig.tick_until(tree, lambda: tree.root.status is Status.SUCCESS)
     assert trace[0].status is Status.RUNNING
     assert rig.manager.actual("pilot").state is State.ACTIVE
 
 
-def test_attach_manager_reaches_every_behaviour_of_the_subtree_through_setup_with_descendants(rig: Rig) -> None:
+def test_attach_manager_reaches_every_behaviour_of_the_subtree_through_setup_with_descendants(
+        rig: SimulatedSystem) -> None:
     root = py_trees.composites.Sequence("Mission", memory=True, children=[
         ChangeMode("Normal", "pilot", "f_normal_mode"),
         ModeIs("Normal?", "pilot", "f_normal_mode"),
@@ -50,11 +52,11 @@ def test_attach_manager_reaches_every_behaviour_of_the_subtree_through_setup_wit
     assert attach_manager(root, rig.manager) is root
     root.setup_with_descendants()
     tree = py_trees.trees.BehaviourTree(root)
-    tick_until(tree, rig, lambda: root.status is Status.SUCCESS)
+    rig.tick_until(tree, lambda: root.status is Status.SUCCESS)
     assert [child.status for child in root.children] == [Status.SUCCESS, Status.SUCCESS]
 
 
-def test_a_subtree_inserted_while_the_tree_runs_finds_the_manager_without_setup(rig: Rig) -> None:
+def test_a_subtree_inserted_while_the_tree_runs_finds_the_manager_without_setup(rig: SimulatedSystem) -> None:
     root = py_trees.composites.Sequence("Mission", memory=False, children=[
         py_trees.behaviours.Success("Warm up"),
     ])
@@ -63,12 +65,12 @@ def test_a_subtree_inserted_while_the_tree_runs_finds_the_manager_without_setup(
     tree.tick()
     inserted = hold_mode("Survey", "pilot", "f_degraded_mode", py_trees.behaviours.Running("Scan"))
     tree.insert_subtree(inserted, root.id, 1)  # never set up: the manager is found through the parents
-    tick_until(tree, rig, lambda: rig.manager.actual("pilot").mode == "f_degraded_mode")
+    rig.tick_until(tree, lambda: rig.manager.actual("pilot").mode == "f_degraded_mode")
     assert inserted.status is Status.RUNNING
 
 
-def test_an_own_manager_wins_over_an_attached_one_which_wins_over_setup(rig: Rig) -> None:
-    other, third = Rig(bundled("pilot"), recovery=False), Rig(bundled("pilot"), recovery=False)
+def test_an_own_manager_wins_over_an_attached_one_which_wins_over_setup(rig: SimulatedSystem) -> None:
+    other, third = SimulatedSystem(bundled("pilot"), recovery=False), SimulatedSystem(bundled("pilot"), recovery=False)
     own = ModeIs("Own", "pilot", "f_normal_mode", manager=other.manager)
     attached = ModeIs("Attached", "pilot", "f_normal_mode")
     subtree = attach_manager(py_trees.composites.Sequence("Sub", memory=False, children=[own, attached]),
@@ -94,7 +96,7 @@ def test_an_attached_manager_of_the_wrong_type_is_refused_at_once() -> None:
         attach_manager(py_trees.behaviours.Success("Root"), "pilot")  # type: ignore[arg-type]
 
 
-def test_an_unknown_mode_found_late_is_the_usual_error_at_the_first_tick(rig: Rig) -> None:
+def test_an_unknown_mode_found_late_is_the_usual_error_at_the_first_tick(rig: SimulatedSystem) -> None:
     root = attach_manager(py_trees.composites.Sequence("Mission", memory=True, children=[]), rig.manager)
     tree = py_trees.trees.BehaviourTree(root)
     tree.setup()

@@ -7,11 +7,12 @@ import logging
 from dataclasses import dataclass
 
 import pytest
-from engine_helpers import Rig, bundled
+from engine_helpers import bundled
 
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.requests import Request
 from sm_bt.ros.diagnostics import ERROR, OK, STALE, WARN, PartStatus, part_status
+from sm_bt.sim import SimulatedSystem
 
 
 @dataclass(frozen=True)
@@ -21,13 +22,13 @@ class SlowLink:
     slow: bool = True
 
 
-def status(rig: Rig, part: str, last: Request | None = None, link: object = None) -> PartStatus:
+def status(rig: SimulatedSystem, part: str, last: Request | None = None, link: object = None) -> PartStatus:
     with rig.manager.lock:
         return part_status(rig.manager, part, last, link)
 
 
 def test_a_part_at_its_target_is_ok_with_its_values() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     request = rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
     pilot = status(rig, "pilot", request)
     assert (pilot.level, pilot.message) == (OK, "active.f_normal_mode")
@@ -39,7 +40,7 @@ def test_a_part_at_its_target_is_ok_with_its_values() -> None:
 
 
 def test_a_request_in_flight_warns_with_its_progress() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     request = rig.manager.change_mode("pilot", "f_normal_mode")
     pilot = status(rig, "pilot", request)
     assert pilot.level == WARN and pilot.value("last_request_outcome") == "running"
@@ -47,7 +48,7 @@ def test_a_request_in_flight_warns_with_its_progress() -> None:
 
 
 def test_a_failed_request_is_an_error_until_the_part_is_at_its_target() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     rig.finish(rig.manager.change_state("pilot", "configure"))
     rig.backend.fail_next("amcl", Transition.ACTIVATE)
     request = rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
@@ -57,7 +58,7 @@ def test_a_failed_request_is_an_error_until_the_part_is_at_its_target() -> None:
 
 
 def test_a_refused_request_warns_and_says_why() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     refused = rig.manager.change_mode("pilot", "no_such_mode")
     pilot = status(rig, "pilot", refused)
     assert pilot.level == WARN and pilot.value("last_request_outcome") == "refused"
@@ -65,7 +66,8 @@ def test_a_refused_request_warns_and_says_why() -> None:
 
 
 def test_an_unreachable_node_is_an_error_with_the_reason_and_an_unseen_one_is_stale() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False, vanish_after=0.5, late={"laser_resender": 100.0})
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False, vanish_after=0.5,
+                          late={"laser_resender": 100.0})
     rig.run(0.1)
     assert status(rig, "laser_resender").level == STALE
     rig.backend.crash("amcl")
@@ -76,7 +78,7 @@ def test_an_unreachable_node_is_an_error_with_the_reason_and_an_unseen_one_is_st
 
 
 def test_a_slow_link_warns_and_shows_its_round_trip() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     rig.run(0.1)
     amcl = status(rig, "amcl", link=SlowLink())
     assert amcl.level == WARN and "slow link: answers in 450 ms" in amcl.message
@@ -85,7 +87,7 @@ def test_a_slow_link_warns_and_shows_its_round_trip() -> None:
 
 
 def test_a_fault_beyond_the_grace_period_is_an_error() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False, grace_period=0.5)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False, grace_period=0.5)
     rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
     rig.backend.trigger("amcl", Transition.DEACTIVATE)
     rig.run(0.2)
@@ -97,11 +99,11 @@ def test_a_fault_beyond_the_grace_period_is_an_error() -> None:
 
 
 def test_a_node_back_from_out_of_reach_says_how_it_came_back(caplog: pytest.LogCaptureFixture) -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
     assert status(rig, "amcl").value("last_return") == ""
     rig.backend.crash("amcl")
-    rig.until(lambda: not rig.manager.observation("amcl").reachable)
+    rig.run_until(lambda: not rig.manager.observation("amcl").reachable)
     rig.run(3.0)
     with caplog.at_level(logging.INFO, logger="sm_bt.manager"):
         rig.backend.restart("amcl")
@@ -114,7 +116,7 @@ def test_a_node_back_from_out_of_reach_says_how_it_came_back(caplog: pytest.LogC
     # Back as it was: said so too.
     rig.finish(rig.manager.change_state("amcl", "configure"))
     rig.backend.crash("amcl")
-    rig.until(lambda: not rig.manager.observation("amcl").reachable)
+    rig.run_until(lambda: not rig.manager.observation("amcl").reachable)
     rig.backend.restart("amcl", "inactive")
     rig.run(0.5)
     back = rig.manager.last_return("amcl")

@@ -31,7 +31,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model, NodePart, ParamValue
-from sm_bt.sim import EventKind, SimBackend
+from sm_bt.sim import EventKind, NotReached, SimulatedSystem
 
 TRANSITIONS = ("configure", "activate", "deactivate", "cleanup")
 #: Node-level requests mixed in with the systems' (a mode other than the default where there is one).
@@ -66,15 +66,12 @@ def make(manager: ModeManager, action: RequestAction) -> Request:
     return manager.change_state(action.part, action.transition)
 
 
-def run_until(backend: SimBackend, stop: Callable[[], bool], limit: float = LIMIT) -> bool:
+def run_until(system: SimulatedSystem, stop: Callable[[], bool], limit: float = LIMIT) -> bool:
     """Advance event by event until ``stop()`` holds (True) or ``limit`` seconds passed (False)."""
-    clock = backend.clock
-    end = clock.now() + limit
-    while not stop():
-        due = clock.next_due()
-        if due is None or due > end:
-            return False
-        clock.run_until(due)
+    try:
+        system.run_until(stop, limit, step=None)
+    except NotReached:
+        return False
     return True
 
 
@@ -112,7 +109,7 @@ def _show(action: RequestAction) -> str:
     return f"{kind}({action.part}, {arg})"
 
 
-def start(name: str, settled: bool) -> tuple[SimBackend, ModeManager]:
+def start(name: str, settled: bool) -> SimulatedSystem:
     """A manager over nodes all unconfigured, or settled in the active mode (the nodes start in
     it, and the manager is asked for it: the request succeeds at once and sets the targets)."""
     model = fixed_model(name)
@@ -125,18 +122,19 @@ def start(name: str, settled: bool) -> tuple[SimBackend, ModeManager]:
             spec = model.parts[node]
             if target.mode is not None and isinstance(spec, NodePart):
                 parameters[node] = spec.modes[target.mode].values()
-    backend = SimBackend(model, transition_delay=TRANSITION_DELAY, initial_state=states,
-                         initial_parameters=parameters)
-    manager = ModeManager(model, backend)
+    system = SimulatedSystem(model, transition_delay=TRANSITION_DELAY, initial_state=states,
+                             initial_parameters=parameters, record=False)
+    manager = system.manager
     if settled:
         request = manager.change_mode(*ACTIVE_MODE[name])
         assert request.done and request.succeeded and not manager.requests(), request
-    return backend, manager
+    return system
 
 
 def run_pair(name: str, settled: bool, offset: str, r1: RequestAction, r2: RequestAction) -> PairResult:
     model = fixed_model(name)
-    backend, manager = start(name, settled)
+    system = start(name, settled)
+    backend, manager = system.backend, system.manager
     before = manager.actual(r1.part).state
     first = make(manager, r1)
     if offset == "one tick":
@@ -144,16 +142,16 @@ def run_pair(name: str, settled: bool, offset: str, r1: RequestAction, r2: Reque
     elif offset == "mid-transition":
         # Half way through the first transition r1 starts (or a tick later when it starts none).
         seen = len(backend.events)
-        run_until(backend, lambda: any(e.kind is EventKind.TRANSITION for e in backend.events[seen:]), 1.0)
+        run_until(system, lambda: any(e.kind is EventKind.TRANSITION for e in backend.events[seen:]), 1.0)
         backend.clock.advance(TRANSITION_DELAY / 2)
     elif offset == "after settling":
-        run_until(backend, lambda: first.done and not manager.requests())
+        run_until(system, lambda: first.done and not manager.requests())
     actual, target = manager.actual(r2.part).state, manager.target(r2.part)
     second = make(manager, r2)
     refused = second.done and not second.succeeded
     reached: list[str] = []
     second.add_done_callback(lambda r: reached.append(str(manager.actual(r.part))))
-    finished = run_until(backend, lambda: first.done and second.done and not manager.requests())
+    finished = run_until(system, lambda: first.done and second.done and not manager.requests())
 
     problems = []
     if not finished:

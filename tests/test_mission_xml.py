@@ -8,15 +8,16 @@ from pathlib import Path
 
 import py_trees
 import pytest
-from engine_helpers import Rig, bundled
+from engine_helpers import bundled
 from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis_profiles import examples
 from py_trees.common import Status
-from tree_helpers import fresh_blackboard, tick_until
+from tree_helpers import fresh_blackboard
 
 from sm_bt.behaviours import ChangeMode, OnDivergence
 from sm_bt.engine.lifecycle import Outcome, Transition
+from sm_bt.sim import SimulatedSystem
 from sm_bt.trees import pilot
 from sm_bt.trees.mission_xml import MAX_DEPTH, TreeFileError, check_tree, load_tree
 
@@ -157,7 +158,7 @@ def test_the_shipped_pilot_xml_checks_clean_and_names_nodes_as_written() -> None
 
 
 def test_a_loaded_tree_runs_with_its_manager_attached(tmp_path: Path) -> None:
-    rig = Rig(PILOT, recovery=False, grace_period=0.5)
+    rig = SimulatedSystem(PILOT, recovery=False, grace_period=0.5)
     path = _write(tmp_path, _tree(
         '    <Sequence name="Mission">\n'
         '      <ChangeState name="Configure" part="pilot" transition="configure"/>\n'
@@ -169,11 +170,11 @@ def test_a_loaded_tree_runs_with_its_manager_attached(tmp_path: Path) -> None:
     root = load_tree(path, manager=rig.manager)
     tree = py_trees.trees.BehaviourTree(root)
     tree.setup()  # no manager= here: load_tree attached it
-    tick_until(tree, rig, lambda: root.children[1].status is Status.SUCCESS)
+    rig.tick_until(tree, lambda: root.children[1].status is Status.SUCCESS)
     check = next(b for b in root.iterate() if isinstance(b, OnDivergence))
     assert check.blackboard.remappings == {"/divergence": "/fault"}
     rig.backend.trigger("laser_resender", Transition.DEACTIVATE, outcome=Outcome.ERROR)
-    tick_until(tree, rig, lambda: root.status is Status.SUCCESS)
+    rig.tick_until(tree, lambda: root.status is Status.SUCCESS)
     assert py_trees.blackboard.Blackboard.get("/fault").part == "laser_resender"
 
 

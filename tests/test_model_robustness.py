@@ -57,15 +57,12 @@ def _nested_systems(depth: int) -> str:
 
 def test_regression_a_thousand_systems_one_inside_the_other_load_and_run() -> None:
     """The cycle check recursed once per level: RecursionError at about 1,000."""
-    from sm_bt.engine.manager import ModeManager
-    from sm_bt.sim import SimBackend
+    from sm_bt.sim import SimulatedSystem
 
     model = load_model_text(_nested_systems(3000), "deep.yaml")
     assert model.ancestors("leaf")[-1] == "s0" and len(model.ancestors("leaf")) == 3000
-    backend = SimBackend(model)
-    request = ModeManager(model, backend).change_state("s0", "configure")
-    while not request.done:
-        backend.clock.advance(0.1)
+    system = SimulatedSystem(model, record=False)
+    request = system.finish(system.manager.change_state("s0", "configure"))
     assert request.succeeded, request.reason
 
 

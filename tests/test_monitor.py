@@ -7,7 +7,7 @@ import json
 from typing import Any
 
 import pytest
-from engine_helpers import Rig, bundled, fixture
+from engine_helpers import bundled, fixture
 from rich.console import Console
 from rich.table import Table
 
@@ -15,13 +15,14 @@ from sm_bt.cli import main
 from sm_bt.engine.events import Cause
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.monitor import ERROR_STYLE, TRANSIENT_STYLE, Monitor, Row, render_rich, render_text, snapshot, to_json
+from sm_bt.sim import SimulatedSystem
 
 
 def by_part(rows: list[Row]) -> dict[str, Row]:
     return {row.part: row for row in rows}
 
 
-def normal(rig: Rig) -> None:
+def normal(rig: SimulatedSystem) -> None:
     """Configure the pilot and put it in f_normal_mode."""
     assert rig.finish(rig.manager.change_state("pilot", "configure")).succeeded
     assert rig.finish(rig.manager.change_mode("pilot", "f_normal_mode")).succeeded
@@ -41,14 +42,14 @@ def row_index(table: Table, part: str) -> int:
 
 
 def test_rows_are_systems_then_nodes_each_sorted() -> None:
-    rig = Rig(fixture("nested"), rules=False, recovery=False)
+    rig = SimulatedSystem(fixture("nested"), rules=False, recovery=False)
     rows = snapshot(rig.manager)
     assert [(r.kind, r.part) for r in rows] == [
         ("system", "base"), ("system", "robot"), ("node", "arm"), ("node", "drive"), ("node", "lidar")]
 
 
 def test_inferred_values_carry_the_marker_and_the_flags() -> None:
-    rig = Rig(bundled("pilot"))
+    rig = SimulatedSystem(bundled("pilot"))
     rows = by_part(snapshot(rig.manager))
     assert (rows["pilot"].actual_state, rows["pilot"].raw_state, rows["pilot"].state_inferred) == \
         ("unconfigured(*)", "unconfigured", True)
@@ -68,7 +69,7 @@ def test_inferred_values_carry_the_marker_and_the_flags() -> None:
 
 
 def test_divergence_causes_in_flight_then_grace_then_fault() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     rig.manager.change_state("pilot", "configure")
     rig.run(0.02)
     pilot = by_part(snapshot(rig.manager))["pilot"]
@@ -90,7 +91,7 @@ def test_divergence_causes_in_flight_then_grace_then_fault() -> None:
 
 
 def test_override_is_an_error_divergence() -> None:
-    rig = Rig(bundled("pilot"))
+    rig = SimulatedSystem(bundled("pilot"))
     normal(rig)
     assert rig.finish(rig.manager.change_state("laser_resender", "deactivate")).succeeded
     rig.run(3.0)
@@ -103,7 +104,7 @@ def test_override_is_an_error_divergence() -> None:
 
 
 def test_rich_table_shows_sections_values_markers_and_legend() -> None:
-    rig = Rig(bundled("pilot"))
+    rig = SimulatedSystem(bundled("pilot"))
     normal(rig)
     table = render_rich(snapshot(rig.manager), title="the pilot")
     console = record()
@@ -124,7 +125,7 @@ def test_rich_table_shows_sections_values_markers_and_legend() -> None:
 
 
 def test_rich_rows_are_styled_by_divergence() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     normal(rig)
     rig.backend.trigger("laser_resender", Transition.DEACTIVATE)
     rig.run(0.5)
@@ -151,7 +152,7 @@ def test_rich_rows_are_styled_by_divergence() -> None:
 
 
 def test_json_snapshot_shape_and_round_trip() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     normal(rig)
     rig.backend.trigger("laser_resender", Transition.DEACTIVATE)
     rig.run(3.0)
@@ -178,7 +179,7 @@ def test_json_snapshot_shape_and_round_trip() -> None:
 def test_json_times_are_seconds_since_the_start_of_the_run() -> None:
     """On ROS the clock is monotonic time since boot: 'since' was raw clock time while 'time' was
     relative to the run's start. Both count from the epoch now."""
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     normal(rig)
     fault_at = rig.clock.now()
     rig.backend.trigger("laser_resender", Transition.DEACTIVATE)
@@ -191,7 +192,7 @@ def test_json_times_are_seconds_since_the_start_of_the_run() -> None:
 
 
 def test_json_has_nulls_before_any_target() -> None:
-    rig = Rig(bundled("pilot"))
+    rig = SimulatedSystem(bundled("pilot"))
     entry = to_json(snapshot(rig.manager), 0.0)["parts"][0]
     assert (entry["part"], entry["target_state"], entry["target_mode"], entry["actual_mode"]) == \
         ("pilot", None, None, None)
@@ -201,7 +202,7 @@ def test_json_has_nulls_before_any_target() -> None:
 
 
 def test_monitor_renders_only_when_something_changed() -> None:
-    rig = Rig(bundled("pilot"))
+    rig = SimulatedSystem(bundled("pilot"))
     console = record()
     monitor = Monitor(rig.manager, console, title="pilot")
     assert monitor.refresh() is True  # the first view
@@ -226,7 +227,7 @@ def test_monitor_renders_only_when_something_changed() -> None:
 
 
 def test_monitor_json_lines_one_per_change() -> None:
-    rig = Rig(bundled("pilot"))
+    rig = SimulatedSystem(bundled("pilot"))
     stream = io.StringIO()
     monitor = Monitor(rig.manager, stream)
     assert monitor.json
@@ -248,7 +249,7 @@ def by_state(data: dict[str, Any]) -> dict[str, tuple[str, str | None]]:
 
 
 def test_monitor_live_updates_in_place_and_leaves_the_last_table() -> None:
-    rig = Rig(bundled("pilot"))
+    rig = SimulatedSystem(bundled("pilot"))
     console = record()
     monitor = Monitor(rig.manager, console, title="pilot")
     with monitor.live():
@@ -349,7 +350,7 @@ def _printed(console_stream: io.StringIO) -> str:
     from sm_bt.monitor import terminal_console
 
     console = terminal_console(console_stream)
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     normal(rig)
     console.print("[  12.00 s] " + "a long narration line " * 20, style="bold red", markup=False)
     console.print(render_rich(snapshot(rig.manager), title="pilot"))

@@ -11,9 +11,8 @@ from engine_helpers import bundled
 from py_trees.common import Status
 
 from sm_bt.engine.events import Event
-from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model
-from sm_bt.sim import SimBackend
+from sm_bt.sim import SimulatedSystem
 from sm_bt.sim.world import PATROL, LaserDevice, World
 from sm_bt.trees import pilot, pilot_metacontrol
 from sm_bt.trees.mission_xml import load_tree
@@ -43,16 +42,13 @@ class Mission:
     """A pilot tree ticked every 0.1 s of virtual time against simulated nodes."""
 
     def __init__(self, tree: str, cycles: int = 3, model: Model | None = None, time_scale: float = 1.0) -> None:
-        self.model = model or bundled("pilot")
-        self.backend = SimBackend(self.model, transition_delay=0.2, parameter_delay=0.05)
-        self.clock = self.backend.clock
-        self.manager = ModeManager(self.model, self.backend, request_timeout=10.0, grace_period=1.0,
-                                   recovery_attempts=1)
+        self.system = SimulatedSystem(model or bundled("pilot"), transition_delay=0.2, parameter_delay=0.05,
+                                      request_timeout=10.0, grace_period=1.0, recovery_attempts=1)
+        self.backend, self.clock, self.manager = self.system.backend, self.system.clock, self.system.manager
         self.world = World(time_scale=time_scale)
         self.laser = LaserDevice(self.world, self.backend)
         self.root = TREES[tree](cycles)
-        self.tree = py_trees.trees.BehaviourTree(self.root)
-        self.tree.setup(manager=self.manager, world=self.world)
+        self.tree = self.system.tree(self.root, world=self.world)
 
     def tick(self) -> None:
         self.tree.tick()
@@ -198,11 +194,9 @@ def test_trees_render_with_py_trees_display(tree: str) -> None:
 
 
 def test_tree_setup_without_world_is_a_clear_error() -> None:
-    model = bundled("pilot")
-    backend = SimBackend(model)
-    tree = py_trees.trees.BehaviourTree(pilot.create_root())
+    system = SimulatedSystem(bundled("pilot"))
     with pytest.raises(RuntimeError, match=r"no world; set the tree up with tree.setup\(manager=manager, world="):
-        tree.setup(manager=ModeManager(model, backend))
+        system.tree(pilot.create_root())
 
 
 def test_a_faster_world_drives_and_recharges_in_less_clock_time() -> None:

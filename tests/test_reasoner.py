@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-from engine_helpers import Rig, bundled
+from engine_helpers import bundled
 
 from sm_bt.model.types import SystemPart
 from sm_bt.reasoner import (
@@ -18,6 +18,7 @@ from sm_bt.reasoner import (
     Reasoner,
     pilot_reasoner,
 )
+from sm_bt.sim import SimulatedSystem
 
 
 def design(mode: str, performance: float, *, energy: float = 0.1, safety: float = 0.9,
@@ -238,7 +239,7 @@ def test_check_names_a_missing_part() -> None:
 
 
 def test_reconfigure_drives_the_manager_through_failures_and_recovery() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     reasoner = pilot_reasoner()
     rig.finish(rig.manager.change_state("pilot", "configure"))
     assert str(rig.manager.actual("pilot")) == "inactive"
@@ -276,7 +277,7 @@ def test_reconfigure_drives_the_manager_through_failures_and_recovery() -> None:
 
 
 def test_reconfigure_asks_again_when_the_part_was_deactivated() -> None:
-    rig = Rig(bundled("pilot"), rules=False, recovery=False)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
     reasoner = pilot_reasoner()
     request = reasoner.reconfigure(rig.manager)  # no target yet: ask
     assert request is not None

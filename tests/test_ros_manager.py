@@ -19,6 +19,7 @@ from typing import Any
 
 import pytest
 from engine_helpers import bundled
+from harness import settle
 from lifecycle_msgs.msg import State as StateMsg
 from lifecycle_msgs.msg import Transition as TransitionMsg
 from lifecycle_msgs.msg import TransitionEvent
@@ -71,15 +72,15 @@ def test_a_manager_started_after_the_nodes_picks_up_their_live_state(node_proces
 
 def test_configure_activate_and_mode_changes_of_a_system_are_confirmed(pilot: RosHarness) -> None:
     manager = pilot.manager
-    pilot.settle(manager.change_state("pilot", "configure"))
+    settle(pilot, manager.change_state("pilot", "configure"))
     assert manager.actual("pilot").state is State.INACTIVE
     assert {manager.observation(n).state for n in NODES} == {State.INACTIVE}
-    pilot.settle(manager.change_mode("pilot", "f_performance_mode"))
+    settle(pilot, manager.change_mode("pilot", "f_performance_mode"))
     assert str(manager.actual("pilot")) == "active.f_performance_mode"
     assert manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.5
-    pilot.settle(manager.change_mode("pilot", "f_energy_saving_mode"))
+    settle(pilot, manager.change_mode("pilot", "f_energy_saving_mode"))
     assert str(manager.actual("controller_server")) == "active.SLOW"
-    pilot.settle(manager.change_state("pilot", "deactivate"))
+    settle(pilot, manager.change_state("pilot", "deactivate"))
     assert manager.actual("pilot").state is State.INACTIVE
 
 
@@ -90,8 +91,8 @@ def test_the_calls_of_a_finished_change_leave_nothing_for_the_garbage_collector(
     gc.collect()
     gc.disable()
     try:
-        pilot.settle(manager.change_state("pilot", "configure"))
-        pilot.settle(manager.change_mode("pilot", "f_performance_mode"))
+        settle(pilot, manager.change_state("pilot", "configure"))
+        settle(pilot, manager.change_mode("pilot", "f_performance_mode"))
         time.sleep(0.2)  # late answers and events of the change, dropped or matched
         left = [o for o in gc.get_objects() if isinstance(o, _Call) and o.finished]
     finally:
@@ -114,33 +115,33 @@ def test_a_transition_the_node_refuses_fails_with_the_reason_and_the_node_keeps_
     assert not results[0].ok and results[0].refused  # nothing ran: the caller's view was out of date
     assert results[0].reason == "activate of amcl refused: not a transition of its state unconfigured " \
                                 "(available: configure, shutdown)"
-    pilot.settle(pilot.manager.change_mode("amcl", "__DEFAULT__"))
+    settle(pilot, pilot.manager.change_mode("amcl", "__DEFAULT__"))
     assert str(pilot.manager.actual("amcl")) == "active.__DEFAULT__"
 
 
 def test_a_transition_whose_callback_fails_fails_the_request_with_the_reason(pilot: RosHarness) -> None:
     pilot.fail_next("amcl", Transition.CONFIGURE)
     request = pilot.manager.change_state("amcl", "configure")
-    pilot.wait(lambda: request.done)
+    pilot.run_until(lambda: request.done)
     assert not request.succeeded
     assert "configure of amcl failed: its on_configure callback did not succeed (node now unconfigured)" \
         in request.reason, request.reason
 
 
 def test_a_rejected_parameter_set_fails_the_request_with_the_nodes_reason(pilot: RosHarness) -> None:
-    pilot.settle(pilot.manager.change_mode("controller_server", "__DEFAULT__"))
+    settle(pilot, pilot.manager.change_mode("controller_server", "__DEFAULT__"))
     pilot.reject_parameters("controller_server", "locked by the safety officer")
     request = pilot.manager.change_mode("controller_server", "FAST")
-    pilot.wait(lambda: request.done)
+    pilot.run_until(lambda: request.done)
     assert not request.succeeded
     assert "locked by the safety officer" in request.reason
     assert pilot.manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.3
 
 
 def test_parameters_changed_behind_the_managers_back_are_seen(pilot: RosHarness) -> None:
-    pilot.settle(pilot.manager.change_mode("controller_server", "__DEFAULT__"))
+    settle(pilot, pilot.manager.change_mode("controller_server", "__DEFAULT__"))
     pilot.set_parameter("controller_server", "FollowPath.max_vel_x", 0.1)
-    pilot.wait(lambda: pilot.manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.1)
+    pilot.run_until(lambda: pilot.manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.1)
 
 
 def test_a_plain_node_is_reported_as_such_and_cannot_change_state(node_processes: Starter) -> None:
@@ -152,11 +153,11 @@ def test_a_plain_node_is_reported_as_such_and_cannot_change_state(node_processes
         actual = rig.manager.actual("manipulator")
         assert actual.state is State.ACTIVE and actual.state_inferred, "inferred, not reported"
         request = rig.manager.change_state("manipulator", "deactivate")
-        rig.wait(lambda: request.done)
+        rig.run_until(lambda: request.done)
         assert not request.succeeded
         assert "no lifecycle services" in request.reason
         # Its parameters are still managed.
-        rig.settle(rig.manager.change_mode("manipulator", "STRONG"))
+        settle(rig, rig.manager.change_mode("manipulator", "STRONG"))
         assert rig.manager.observation("manipulator").parameters["max_torque"] == 0.2
     finally:
         rig.close()
@@ -173,13 +174,13 @@ def test_killing_a_node_mid_change_fails_the_request_marks_it_unknown_and_recove
     try:
         rig.set_parameter("controller_server", "sim.transition_delay", 3.0)
         request = rig.manager.change_mode("pilot", "f_normal_mode")
-        rig.wait(lambda: rig.manager.observation("amcl").state is State.ACTIVE, 5.0)
+        rig.run_until(lambda: rig.manager.observation("amcl").state is State.ACTIVE, 5.0)
         controller.kill()
         killed = time.monotonic()
-        rig.wait(lambda: request.done, 15.0)
+        rig.run_until(lambda: request.done, 15.0)
         assert not request.succeeded
         assert "controller_server" in request.reason, request.reason
-        rig.wait(lambda: not rig.manager.observation("controller_server").reachable, 10.0)
+        rig.run_until(lambda: not rig.manager.observation("controller_server").reachable, 10.0)
         assert time.monotonic() - killed < BACKEND_OPTIONS["call_timeout"] + BACKEND_OPTIONS["liveness_timeout"] + 1
         assert rig.manager.actual("controller_server").state is State.UNKNOWN
         assert rig.manager.actual("controller_server").reason, "unknown, with a reason"
@@ -189,7 +190,7 @@ def test_killing_a_node_mid_change_fails_the_request_marks_it_unknown_and_recove
         assert call(get_state, GetState.Request(), timeout=2.0).current_state.id == StateMsg.PRIMARY_STATE_UNKNOWN
         # A fresh process (unconfigured, default parameters): recovery brings it back to its target.
         controller.start()
-        rig.wait(lambda: str(rig.manager.actual("pilot")) == "active.f_normal_mode", 20.0)
+        rig.run_until(lambda: str(rig.manager.actual("pilot")) == "active.f_normal_mode", 20.0)
         assert str(rig.manager.actual("controller_server")) == "active.__DEFAULT__"
         assert rig.manager.target("controller_server") == StateMode(State.ACTIVE, "__DEFAULT__")
     finally:

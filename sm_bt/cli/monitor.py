@@ -29,7 +29,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.types import Model
 from sm_bt.monitor import Monitor, terminal_console
-from sm_bt.sim import SimBackend
+from sm_bt.sim import SimulatedSystem
 
 STEP = 0.1  # virtual seconds per clock advance: appended output changes at most this often
 LIVE_STEP = 0.02  # finer in place, where intermediate states (configuring, ...) cost no lines
@@ -116,10 +116,9 @@ def run(args: argparse.Namespace) -> int:
             manager, graph = runtime.manager, runtime.node
             advance = time.sleep
         else:
-            backend = SimBackend(model)
-            manager = ModeManager(model, backend)
-            stack.callback(manager.close)
-            advance = _paced(backend.clock.advance, args.speed)
+            system = stack.enter_context(SimulatedSystem(model, record=False))
+            manager = system.manager
+            advance = _paced(system.run, args.speed)
         monitor = Monitor(manager, sys.stdout if args.json else terminal_console(), title=args.model,
                           epoch=manager.clock.now())
         stack.callback(monitor.close)

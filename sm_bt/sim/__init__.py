@@ -3,7 +3,7 @@ run by a mode manager over them, on a virtual clock."""
 
 from sm_bt.sim.backend import EventKind, NodeStatus, SimBackend, SimEvent
 from sm_bt.sim.node import ParameterRejected, SimNode, TransitionEvent, TransitionRefused, parameter_type
-from sm_bt.sim.system import NotReached, SimulatedSystem, Tick
+from sm_bt.sim.system import NotReached, SimulatedSystem, Tick, tick_until
 
 __all__ = [
     "EventKind",
@@ -18,4 +18,5 @@ __all__ = [
     "TransitionEvent",
     "TransitionRefused",
     "parameter_type",
+    "tick_until",
 ]

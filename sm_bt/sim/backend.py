@@ -9,10 +9,10 @@ call; callbacks take ``transition_delay`` (``error_delay`` for ``on_error``), pa
 Faults are injected from outside (tests, demos) and each one is recorded in :attr:`SimBackend.events`:
 :meth:`~SimBackend.fail_next`, :meth:`~SimBackend.hang_next`, :meth:`~SimBackend.reject_parameters`,
 :meth:`~SimBackend.set_parameter`, :meth:`~SimBackend.trigger`, :meth:`~SimBackend.crash`,
-:meth:`~SimBackend.vanish`, :meth:`~SimBackend.restart`, :meth:`~SimBackend.start_late`. Armed faults and delay overrides belong to
-the simulation, not to the node process: they survive a restart (:meth:`~SimBackend.clear_faults` disarms
-them). Fault methods act at once (their reports to the listener come from inside the call); only the
-Backend requests are deferred.
+:meth:`~SimBackend.vanish`, :meth:`~SimBackend.restart`, :meth:`~SimBackend.start_late`. Armed faults
+and delay overrides belong to the simulation, not to the node process: they survive a restart
+(:meth:`~SimBackend.clear_faults` disarms them). Fault methods act at once (their reports to the
+listener come from inside the call); only the Backend requests are deferred.
 
 Reports to the listener come at once unless ``report_delay`` is set: then every report (appearing,
 state, parameters, vanishing) comes that many seconds after it happened, in order, while answers to

@@ -19,9 +19,10 @@ pytest, the ``simulated_system`` fixture of :mod:`sm_bt.testing` makes one and c
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -59,6 +60,26 @@ class Tick:
     feedback: str
 
 
+def tick_until(tree: py_trees.trees.BehaviourTree, condition: Callable[[], bool], *, now: Callable[[], float],
+               advance: Callable[[float], None], watch: py_trees.behaviour.Behaviour | None = None,
+               step: float = 0.05, timeout: float = 10.0) -> list[Tick]:
+    """Tick ``tree`` and ``advance(step)`` after each tick, until ``condition()`` holds right after a
+    tick; ``now()`` tells the time (for a tree on real nodes: ``time.monotonic`` and ``time.sleep``).
+    What ``watch`` (default: the root) showed at every tick; :class:`NotReached` once ``timeout``
+    seconds passed without the condition."""
+    watched = watch if watch is not None else tree.root
+    start = now()
+    trace: list[Tick] = []
+    while True:
+        tree.tick()
+        trace.append(Tick(now(), watched.status, watched.feedback_message))
+        if condition():
+            return trace
+        if now() - start >= timeout:
+            raise NotReached(f"condition not met within {timeout:g} s; last tick of {watched.name}: {trace[-1]}")
+        advance(step)
+
+
 def as_model(model: Model | str | os.PathLike[str]) -> Model:
     """``model`` itself, or the model file it names (a path, or a bundled model's name: ``"pilot"``),
     loaded strictly (:class:`~sm_bt.model.errors.ModelError` when it is not valid)."""
@@ -66,10 +87,8 @@ def as_model(model: Model | str | os.PathLike[str]) -> Model:
         return model
     path = Path(model)
     if not path.exists() and isinstance(model, str) and os.sep not in model and "/" not in model:
-        try:
+        with contextlib.suppress(KeyError):  # not bundled either: load_model says the file is missing
             path = bundled.path(model)
-        except KeyError:
-            pass
     return load_model(path)
 
 
@@ -112,15 +131,24 @@ class SimulatedSystem:
         """Let ``seconds`` of virtual time pass: everything due on the way happens, in order."""
         self.backend.clock.advance(seconds)
 
-    def run_until(self, condition: Callable[[], bool], timeout: float = 60.0, step: float = 0.01) -> float:
+    def run_until(self, condition: Callable[[], bool], timeout: float = 60.0, step: float | None = 0.01) -> float:
         """Let time pass ``step`` by ``step`` until ``condition()`` holds; the virtual seconds it took.
-        :class:`NotReached` once ``timeout`` seconds passed without it."""
+        :class:`NotReached` once ``timeout`` seconds passed without it. With ``step=None`` time jumps
+        from one scheduled event to the next (the condition is checked after each), and a system with
+        nothing left to do fails at once."""
         clock = self.backend.clock
         start = clock.now()
         while not condition():
             if clock.now() - start > timeout:
                 raise NotReached(f"condition not met within {timeout:g} s of virtual time")
-            clock.advance(step)
+            if step is not None:
+                clock.advance(step)
+                continue
+            due = clock.next_due()
+            if due is None or due - start > timeout:
+                raise NotReached(f"condition not met within {timeout:g} s of virtual time "
+                                 f"({'nothing left to happen' if due is None else 'nothing due in time'})")
+            clock.run_until(due)
         return clock.now() - start
 
     def finish(self, request: Request, timeout: float = 60.0) -> Request:
@@ -151,19 +179,9 @@ class SimulatedSystem:
         """Tick ``tree``, letting ``step`` seconds pass after each tick, until ``condition()`` holds
         right after a tick. What ``watch`` (default: the root) showed at every tick;
         :class:`NotReached` once ``timeout`` seconds passed without the condition."""
-        watched = watch if watch is not None else tree.root
         clock = self.backend.clock
-        start = clock.now()
-        trace: list[Tick] = []
-        while True:
-            tree.tick()
-            trace.append(Tick(clock.now(), watched.status, watched.feedback_message))
-            if condition():
-                return trace
-            if clock.now() - start >= timeout:
-                raise NotReached(f"condition not met within {timeout:g} s of virtual time; last tick of "
-                                 f"{watched.name}: {trace[-1]}")
-            clock.advance(step)
+        return tick_until(tree, condition, now=clock.now, advance=clock.advance, watch=watch, step=step,
+                          timeout=timeout)
 
     def tick_until_done(self, tree: py_trees.trees.BehaviourTree, *,
                         watch: py_trees.behaviour.Behaviour | None = None, step: float = 0.05,
@@ -233,4 +251,4 @@ class SimulatedSystem:
         self.close()
 
 
-__all__ = ["BACKEND_OPTIONS", "NotReached", "SimulatedSystem", "Tick", "as_model"]
+__all__ = ["BACKEND_OPTIONS", "NotReached", "SimulatedSystem", "Tick", "as_model", "tick_until"]
