@@ -1,4 +1,6 @@
-"""Shared fixtures: the project's own model files live in tests/models/."""
+"""What every test shares: the ROS environment (a domain per run and per xdist worker), the
+requirement markers (tests/support/needs.py), the ROS fixtures; the project's own model files live
+in tests/models/, the helpers in tests/support/."""
 
 from __future__ import annotations
 
@@ -34,8 +36,9 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
 
 MODELS = Path(__file__).parent / "models"
 
-# The ROS test fixtures (node_processes, ros_context); the module imports rclpy only when used.
-pytest_plugins = ("ros_processes",)
+# The ROS test fixtures (node_processes, ros_context; the module imports rclpy only when used) and
+# the fixture that fails a test whose requirement is missing under make test.
+pytest_plugins = ("ros_processes", "needs")
 
 
 @pytest.fixture

@@ -1,0 +1,99 @@
+"""The layers' import rules: model imports nothing of sm_bt, the engine imports no rclpy."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def imported_modules(folder: Path) -> set[str]:
+    found: set[str] = set()
+    for path in folder.rglob("*.py"):
+        found |= imported_modules_of(path)
+    return found
+
+
+def test_model_layer_depends_on_nothing_of_sm_bt_above_it() -> None:
+    modules = imported_modules(ROOT / "sm_bt" / "model")
+    assert not {m for m in modules if m.startswith("sm_bt.") and not m.startswith("sm_bt.model")}
+
+
+def test_engine_depends_only_on_the_model() -> None:
+    modules = imported_modules(ROOT / "sm_bt" / "engine")
+    allowed = ("sm_bt.model", "sm_bt.engine")
+    assert not {m for m in modules if m.startswith("sm_bt.") and not m.startswith(allowed)}
+    assert not {m for m in modules if m.split(".")[0] in {"rclpy", "py_trees", "rich"}}
+
+
+def test_engine_and_sim_import_without_rclpy_loaded() -> None:
+    # A fresh interpreter where importing rclpy would fail loudly: the engine must not need it.
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "import sm_bt.engine.manager, sm_bt.engine.inference, sm_bt.sim, sm_bt.model.loader\n"
+        "assert not any(m == 'rclpy' or m.startswith('rclpy.') for m in sys.modules if sys.modules[m])\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+def test_reasoner_is_usable_without_py_trees() -> None:
+    reasoner = imported_modules_of(ROOT / "sm_bt" / "reasoner.py")
+    assert "sm_bt.model.states" in reasoner
+    assert not {m for m in reasoner if m.split(".")[0] in {"py_trees", "rclpy"}}
+
+
+def test_behaviours_and_trees_sit_above_the_engine() -> None:
+    engine_and_model = imported_modules(ROOT / "sm_bt" / "engine") | imported_modules(ROOT / "sm_bt" / "model")
+    assert not {m for m in engine_and_model if m.startswith(("sm_bt.behaviours", "sm_bt.trees", "sm_bt.sim"))}
+    behaviours = imported_modules(ROOT / "behaviours")
+    assert not {m for m in behaviours if m.startswith(("sm_bt.trees", "sm_bt.demo", "sm_bt.cli"))}
+
+
+def imported_modules_of(path: Path) -> set[str]:
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found.add(node.module)
+    return found
+
+
+def test_only_the_ros_adapters_import_rclpy() -> None:
+    ros_names = {"rclpy", "lifecycle_msgs", "rcl_interfaces", "system_modes_msgs", "std_msgs", "builtin_interfaces"}
+    outside = set()
+    for folder in (ROOT / "sm_bt", ROOT / "behaviours", ROOT / "trees"):
+        for path in folder.rglob("*.py"):
+            if (ROOT / "sm_bt" / "ros") in path.parents:
+                continue
+            outside |= {m for m in imported_modules_of(path) if m.split(".")[0] in ros_names}
+    assert not outside, "rclpy and ROS messages belong in sm_bt.ros"
+    # The simulated side never reaches up into the ROS adapters.
+    below = imported_modules(ROOT / "sm_bt" / "engine") | imported_modules(ROOT / "sm_bt" / "sim") | \
+        imported_modules(ROOT / "behaviours") | imported_modules(ROOT / "trees")
+    assert not {m for m in below if m.startswith("sm_bt.ros")}
+
+
+def test_the_cli_starts_without_rclpy() -> None:
+    # `sm-bt check/modes/demo` must work where the ros extra is missing: ROS is imported lazily.
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "from sm_bt import cli\n"
+        "assert cli.main(['modes', 'pilot']) == 0\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True)
+
+
+def test_the_manager_command_without_rclpy_says_how_to_install_it() -> None:
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "from sm_bt import cli\n"
+        "sys.exit(cli.main(['manager', 'pilot']))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    assert result.returncode == 1
+    assert "ROS 2 is not available here" in result.stderr and "[ros]" in result.stderr
+    assert "Traceback" not in result.stderr

@@ -1,0 +1,210 @@
+"""The mode manager over simulated nodes: confirmed changes, failures, preemption, ordering."""
+
+from __future__ import annotations
+
+import pytest
+from model_files import bundled, fixture
+
+from sm_bt.engine.events import EventKind
+from sm_bt.engine.lifecycle import Outcome, Transition
+from sm_bt.model.states import State, StateMode
+from sm_bt.sim import SimulatedSystem
+
+
+@pytest.fixture
+def rig() -> SimulatedSystem:
+    return SimulatedSystem(bundled("actuation"), rules=False, recovery=False)
+
+
+def test_change_mode_returns_at_once_and_is_confirmed(rig: SimulatedSystem) -> None:
+    request = rig.manager.change_mode("actuation", "PERFORMANCE")
+    assert not request.done  # nothing happens until the nodes answer
+    rig.finish(request)
+    assert request.succeeded, request.reason
+    assert str(rig.manager.actual("actuation")) == "active.PERFORMANCE"
+    assert str(rig.manager.actual("manipulator")) == "active.STRONG"
+    assert str(rig.manager.actual("drive_base")) == "active.FAST"
+    assert rig.backend.node("drive_base").parameters == {"max_speed": 0.9, "controller": "MPC"}
+
+
+def test_lifecycle_path_is_planned_and_parameters_come_first(rig: SimulatedSystem) -> None:
+    rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+    steps = [e for e in rig.backend.events if e.node == "drive_base" and e.kind in ("transition", "parameters")]
+    # Parameters first (a node reads them when it configures), then configure and activate.
+    assert steps[0].kind == "parameters"
+    transitions = [e.transition.transition for e in steps if e.transition is not None]
+    assert transitions == [Transition.CONFIGURE, Transition.ON_CONFIGURE_SUCCESS,
+                           Transition.ACTIVATE, Transition.ON_ACTIVATE_SUCCESS]
+
+
+def test_asking_for_the_current_mode_succeeds_at_once(rig: SimulatedSystem) -> None:
+    rig.finish(rig.manager.change_mode("actuation", "MODERATE"))
+    sent = len(rig.backend.events)
+    again = rig.manager.change_mode("actuation", "MODERATE")
+    assert again.done and again.succeeded
+    assert len(rig.backend.events) == sent
+
+
+def test_same_mode_name_in_another_state_is_not_redundant(rig: SimulatedSystem) -> None:
+    rig.finish(rig.manager.change_mode("actuation", "MODERATE"))
+    rig.finish(rig.manager.change_state("actuation", "deactivate"))
+    assert str(rig.manager.actual("actuation")) == "inactive"
+    again = rig.manager.change_mode("actuation", "MODERATE")
+    assert not again.done
+    rig.finish(again)
+    assert again.succeeded and str(rig.manager.actual("actuation")) == "active.MODERATE"
+
+
+def test_unknown_part_or_mode_fails_at_once(rig: SimulatedSystem) -> None:
+    request = rig.manager.change_mode("actuation", "TURBO")
+    assert request.done and not request.succeeded
+    assert "unknown mode 'TURBO'" in request.reason and "PERFORMANCE" in request.reason
+    request = rig.manager.change_mode("acutation", "PERFORMANCE")
+    assert request.done and "unknown part" in request.reason
+
+
+def test_refused_transition_fails_with_the_reason(rig: SimulatedSystem) -> None:
+    rig.backend.fail_next("manipulator", Transition.CONFIGURE, Outcome.FAILURE)
+    request = rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+    assert not request.succeeded
+    assert "manipulator" in request.reason and "configure" in request.reason
+
+
+def test_rejected_parameters_fail_with_the_reason(rig: SimulatedSystem) -> None:
+    rig.backend.reject_parameters("drive_base", "max_speed out of range")
+    request = rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+    assert not request.succeeded
+    assert "drive_base" in request.reason and "max_speed out of range" in request.reason
+
+
+def test_vanished_node_fails_the_request(rig: SimulatedSystem) -> None:
+    rig.backend.crash("manipulator")
+    request = rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+    assert not request.succeeded
+    assert "manipulator" in request.reason
+    assert rig.manager.actual("manipulator").state is State.UNKNOWN
+
+
+def test_hung_transition_times_out(rig: SimulatedSystem) -> None:
+    rig.backend.hang_next("drive_base", Transition.ACTIVATE)
+    request = rig.manager.change_mode("actuation", "PERFORMANCE", timeout=3.0)
+    took = rig.run_until(lambda: request.done)
+    assert not request.succeeded
+    assert "timed out after 3 s" in request.reason and "drive_base" in request.reason
+    assert took == pytest.approx(3.0, abs=0.02)
+
+
+def test_new_request_preempts_the_one_in_flight(rig: SimulatedSystem) -> None:
+    first = rig.manager.change_mode("actuation", "PERFORMANCE")
+    rig.run(0.03)
+    second = rig.manager.change_mode("actuation", "MODERATE")
+    assert first.done and not first.succeeded and "preempted" in first.reason
+    rig.finish(second)
+    assert second.succeeded
+    assert str(rig.manager.actual("actuation")) == "active.MODERATE"
+
+
+def test_cancel_withdraws_and_restores_the_previous_target(rig: SimulatedSystem) -> None:
+    rig.finish(rig.manager.change_mode("actuation", "MODERATE"))
+    request = rig.manager.change_mode("actuation", "PERFORMANCE")
+    rig.run(0.005)
+    request.cancel()
+    assert request.done and request.reason == "cancelled"
+    assert rig.manager.target("actuation") == StateMode(State.ACTIVE, "MODERATE")
+
+
+def test_late_node_is_waited_for() -> None:
+    rig = SimulatedSystem(bundled("actuation"), late={"drive_base": 2.0}, rules=False, recovery=False)
+    request = rig.manager.change_mode("actuation", "PERFORMANCE")
+    rig.run(1.0)
+    assert not request.done and "drive_base" in request.feedback
+    rig.finish(request)
+    assert request.succeeded
+
+
+def test_change_state_plans_paths_for_systems(rig: SimulatedSystem) -> None:
+    rig.finish(rig.manager.change_state("actuation", "configure"))
+    assert str(rig.manager.actual("manipulator")) == str(rig.manager.actual("drive_base")) == "inactive"
+    request = rig.finish(rig.manager.change_state("actuation", Transition.ACTIVATE))
+    assert request.succeeded
+    assert str(rig.manager.actual("actuation")) == "active.__DEFAULT__"
+    assert str(rig.manager.actual("manipulator")) == "inactive"  # as its default mode says
+    bad = rig.manager.change_state("actuation", "cleanup")
+    assert bad.done and "not valid in state active" in bad.reason
+    rig.finish(rig.manager.change_state("actuation", "deactivate"))
+    rig.finish(rig.manager.change_state("actuation", "cleanup"))
+    assert str(rig.manager.actual("actuation")) == "unconfigured"
+    rig.finish(rig.manager.change_state("actuation", "shutdown"))
+    assert str(rig.manager.actual("drive_base")) == "finalized"
+
+
+def test_activate_keeps_the_mode_last_asked_for(rig: SimulatedSystem) -> None:
+    rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+    rig.finish(rig.manager.change_state("actuation", "deactivate"))
+    request = rig.finish(rig.manager.change_state("actuation", "activate"))
+    assert request.succeeded and str(rig.manager.actual("actuation")) == "active.PERFORMANCE"
+    again = rig.manager.change_state("actuation", "activate")
+    assert again.done and again.succeeded  # already active: nothing to do, no reset to default
+
+
+def test_switching_order_is_respected() -> None:
+    rig = SimulatedSystem(fixture("nested"), rules=False, recovery=False)
+    request = rig.finish(rig.manager.change_mode("robot", "WORK"))
+    assert request.succeeded, request.reason
+    assert str(rig.manager.actual("robot")) == "active.WORK" and str(rig.manager.actual("base")) == "active.PRECISE"
+
+    def first(node: str) -> float:
+        return min(e.time for e in rig.backend.events if e.node == node and e.kind == "transition")
+
+    def last(node: str) -> float:
+        return max(e.time for e in rig.backend.events if e.node == node and e.kind == "transition")
+
+    # robot WORK: base before arm; base PRECISE: lidar before drive.
+    assert last("lidar") <= first("drive")
+    assert max(last("lidar"), last("drive")) <= first("arm")
+
+
+def test_parallel_by_default() -> None:
+    rig = SimulatedSystem(bundled("actuation"), rules=False, recovery=False)
+    rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+    starts = {e.node: e.time for e in reversed(rig.backend.events) if e.kind == "transition"}
+    assert starts["manipulator"] == starts["drive_base"]
+
+
+def test_going_down_ignores_dont_care_parts() -> None:
+    rig = SimulatedSystem(fixture("nested"), rules=False, recovery=False)
+    rig.finish(rig.manager.change_mode("robot", "WORK"))
+    request = rig.finish(rig.manager.change_mode("robot", "PARK"))
+    assert request.succeeded
+    assert str(rig.manager.actual("base")) == "inactive"
+    assert str(rig.manager.actual("arm")) == "active.STRONG"  # PARK leaves it as it is
+
+
+def test_observers_see_requests_and_changes(rig: SimulatedSystem) -> None:
+    seen = []
+    subscription = rig.manager.subscribe(seen.append, part="actuation", kinds=[EventKind.ACTUAL])
+    rig.finish(rig.manager.change_mode("actuation", "MODERATE"))
+    assert seen and all(e.part == "actuation" and e.kind is EventKind.ACTUAL for e in seen)
+    assert str(seen[-1].actual) == "active.MODERATE"
+    subscription.cancel()
+    rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+    assert str(seen[-1].actual) == "active.MODERATE"
+    finished = [e.message for e in rig.events_of(EventKind.REQUEST) if not e.message.endswith("started")]
+    assert len(finished) == 2 and all(" succeeded in " in m for m in finished)
+
+
+def test_observer_may_call_the_manager(rig: SimulatedSystem) -> None:
+    def chain(event) -> None:  # type: ignore[no-untyped-def]
+        if event.kind is EventKind.REQUEST and event.request and event.request.succeeded \
+                and event.request.target.mode == "MODERATE":
+            rig.manager.change_mode("actuation", "PERFORMANCE")
+
+    rig.manager.subscribe(chain)
+    rig.finish(rig.manager.change_mode("actuation", "MODERATE"))
+    rig.run_until(lambda: str(rig.manager.actual("actuation")) == "active.PERFORMANCE")
+
+
+def test_feedback_names_the_step(rig: SimulatedSystem) -> None:
+    request = rig.manager.change_mode("actuation", "PERFORMANCE")
+    rig.run(0.001)
+    assert "set parameters" in request.feedback or "configure" in request.feedback

@@ -1,0 +1,123 @@
+"""What each part's /diagnostics status says, from the manager's state (simulated backend: the
+levels and words; test_ros_liveness checks them on the wire)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import pytest
+from model_files import bundled
+
+from sm_bt.engine.lifecycle import Transition
+from sm_bt.engine.requests import Request
+from sm_bt.ros.diagnostics import ERROR, OK, STALE, WARN, PartStatus, part_status
+from sm_bt.sim import SimulatedSystem
+
+
+@dataclass(frozen=True)
+class SlowLink:
+    rtt: float | None = 0.45
+    window: float = 2.6
+    slow: bool = True
+
+
+def status(rig: SimulatedSystem, part: str, last: Request | None = None, link: object = None) -> PartStatus:
+    with rig.manager.lock:
+        return part_status(rig.manager, part, last, link)
+
+
+def test_a_part_at_its_target_is_ok_with_its_values() -> None:
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
+    request = rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    pilot = status(rig, "pilot", request)
+    assert (pilot.level, pilot.message) == (OK, "active.f_normal_mode")
+    assert pilot.value("target") == "active.f_normal_mode"
+    assert pilot.value("last_request") == f"#{request.id} change_mode pilot f_normal_mode"
+    assert (pilot.value("last_request_outcome"), pilot.value("last_request_by")) == ("succeeded", "user")
+    assert "reachable" not in dict(pilot.values), "a system has no link of its own"
+    assert status(rig, "amcl").value("reachable") == "true"
+
+
+def test_a_request_in_flight_warns_with_its_progress() -> None:
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
+    request = rig.manager.change_mode("pilot", "f_normal_mode")
+    pilot = status(rig, "pilot", request)
+    assert pilot.level == WARN and pilot.value("last_request_outcome") == "running"
+    assert pilot.message.startswith(f"request #{request.id} change_mode pilot f_normal_mode: ")
+
+
+def test_a_failed_request_is_an_error_until_the_part_is_at_its_target() -> None:
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
+    rig.finish(rig.manager.change_state("pilot", "configure"))
+    rig.backend.fail_next("amcl", Transition.ACTIVATE)
+    request = rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    pilot = status(rig, "pilot", request)
+    assert pilot.level == ERROR and pilot.value("last_request_outcome") == "failed"
+    assert "amcl" in pilot.value("last_request_reason")
+
+
+def test_a_refused_request_warns_and_says_why() -> None:
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
+    refused = rig.manager.change_mode("pilot", "no_such_mode")
+    pilot = status(rig, "pilot", refused)
+    assert pilot.level == WARN and pilot.value("last_request_outcome") == "refused"
+    assert "unknown mode 'no_such_mode'" in pilot.message
+
+
+def test_an_unreachable_node_is_an_error_with_the_reason_and_an_unseen_one_is_stale() -> None:
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False, vanish_after=0.5,
+                          late={"laser_resender": 100.0})
+    rig.run(0.1)
+    assert status(rig, "laser_resender").level == STALE
+    rig.backend.crash("amcl")
+    rig.run(1.0)
+    amcl = status(rig, "amcl")
+    assert amcl.level == ERROR and amcl.message.startswith("unreachable: no answer for 0.5 s")
+    assert amcl.value("reachable") == "false"
+
+
+def test_a_slow_link_warns_and_shows_its_round_trip() -> None:
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
+    rig.run(0.1)
+    amcl = status(rig, "amcl", link=SlowLink())
+    assert amcl.level == WARN and "slow link: answers in 450 ms" in amcl.message
+    assert (amcl.value("round_trip_ms"), amcl.value("liveness_window_s")) == ("450.0", "2.60")
+    assert status(rig, "amcl", link=SlowLink(rtt=0.002, window=0.8, slow=False)).level == OK
+
+
+def test_a_fault_beyond_the_grace_period_is_an_error() -> None:
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False, grace_period=0.5)
+    rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    rig.backend.trigger("amcl", Transition.DEACTIVATE)
+    rig.run(0.2)
+    assert status(rig, "amcl").level == WARN, "within the grace period"
+    rig.run(1.0)
+    amcl = status(rig, "amcl")
+    assert amcl.level == ERROR and amcl.message.startswith("target active"), amcl.message
+    assert amcl.value("divergence").startswith("fault")
+
+
+def test_a_node_back_from_out_of_reach_says_how_it_came_back(caplog: pytest.LogCaptureFixture) -> None:
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
+    rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    assert status(rig, "amcl").value("last_return") == ""
+    rig.backend.crash("amcl")
+    rig.run_until(lambda: not rig.manager.observation("amcl").reachable)
+    rig.run(3.0)
+    with caplog.at_level(logging.INFO, logger="sm_bt.manager"):
+        rig.backend.restart("amcl")
+        rig.run(0.5)
+    back = rig.manager.last_return("amcl")
+    assert back is not None and back.changed and round(back.away, 1) == 3.0
+    said = "unconfigured (back after 3.0 s; was active.__DEFAULT__)"
+    assert status(rig, "amcl").value("last_return") == said
+    assert f"node amcl appeared: {said}" in caplog.messages, caplog.messages
+    # Back as it was: said so too.
+    rig.finish(rig.manager.change_state("amcl", "configure"))
+    rig.backend.crash("amcl")
+    rig.run_until(lambda: not rig.manager.observation("amcl").reachable)
+    rig.backend.restart("amcl", "inactive")
+    rig.run(0.5)
+    back = rig.manager.last_return("amcl")
+    assert back is not None and not back.changed and back.describe().startswith("inactive (back after ")

@@ -1,0 +1,182 @@
+"""``sm-bt mode ...``/``sm-bt state ...`` against ``sm-bt manager`` on ROS 2, as a person uses them.
+
+The manager runs in its own process, the pilot's nodes in another; the commands run through
+``sm_bt.cli.main`` here (their own rclpy context each time). Checked: getting and setting modes
+and states with confirmation and its time, the modes offered, a node's own lifecycle service,
+usage errors with the closest names for parts, modes and transitions (exit 2), a change that is
+not confirmed in time (exit 1, where the part is), and no manager at all (exit 1 within the
+timeout, what to check), a change the manager fails (exit 1 at once, the manager's reason).
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Callable
+
+import pytest
+from ros_processes import ManagerProcess, Starter
+
+from sm_bt.cli import main
+
+pytestmark = pytest.mark.ros
+
+
+def sm_bt(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_mode_and_state_commands_drive_the_pilot_and_confirm_each_change(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    manager = start_manager("--grace-period", "0.3")
+    node_processes("pilot")
+    manager.ready()
+    # Serving comes first; the pilot is unknown until the manager has asked every node where it is.
+    deadline = time.monotonic() + 15.0
+    while (state := sm_bt(capsys, "state", "get", "pilot")[1]) == "pilot: unknown\n" and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert state == "pilot: unconfigured\n"
+    assert sm_bt(capsys, "mode", "get", "pilot")[1] == "pilot: (no mode: not active)\n"
+
+    code, out, err = sm_bt(capsys, "state", "set", "pilot", "configure", "--wait")
+    assert (code, err) == (0, "") and re.fullmatch(r"pilot: inactive \d+\.\d\d s after the request\n", out), out
+    code, out, err = sm_bt(capsys, "mode", "set", "pilot", "f_normal_mode", "--wait")
+    assert (code, err) == (0, "")
+    assert re.fullmatch(r"pilot: f_normal_mode confirmed (\d+\.\d\d) s after the request\n", out), out
+    assert sm_bt(capsys, "mode", "get", "pilot")[1] == "pilot: f_normal_mode\n"
+    assert sm_bt(capsys, "state", "get", "amcl")[1] == "amcl: active\n"  # a node: its own service
+
+    code, out, _ = sm_bt(capsys, "mode", "list", "pilot")
+    assert code == 0 and out.splitlines() == ["__DEFAULT__", "f_degraded_mode", "f_energy_saving_mode",
+                                              "f_normal_mode", "f_performance_mode", "f_slow_mode"]
+    assert sm_bt(capsys, "modes", "pilot", "--ros")[1] == out
+
+    # Without --wait: accepted, then done a moment later.
+    assert sm_bt(capsys, "mode", "set", "pilot", "f_degraded_mode") == (0, "pilot: change to f_degraded_mode "
+                                                                            "accepted\n", "")
+    deadline = time.monotonic() + 5.0
+    while sm_bt(capsys, "mode", "get", "pilot")[1] != "pilot: f_degraded_mode\n":
+        assert time.monotonic() < deadline, "f_degraded_mode never reached"
+    assert manager.lines("change_mode pilot f_degraded_mode", "succeeded")
+
+
+def test_names_that_are_not_served_are_usage_errors_with_the_closest_name(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    manager = start_manager()
+    node_processes("pilot")
+    manager.ready()
+    started = time.monotonic()
+    assert sm_bt(capsys, "mode", "set", "pilto", "f_normal_mode") == (
+        2, "", "sm-bt mode: error: no manager serves the part 'pilto' (did you mean 'pilot'?)\n")
+    assert time.monotonic() - started < 8.0  # found out from the graph, not after the 10 s timeout
+    assert sm_bt(capsys, "mode", "set", "pilot", "f_nrmal_mode") == (
+        2, "", "sm-bt mode: error: pilot has no mode 'f_nrmal_mode' (did you mean 'f_normal_mode'?)\n")
+    assert sm_bt(capsys, "state", "set", "pilot", "configur") == (
+        2, "", "sm-bt state: error: 'configur' is not a transition (did you mean 'configure'?)\n")
+    assert not manager.lines("started")  # nothing was asked of the manager
+
+
+def test_a_change_not_confirmed_in_time_fails_and_says_where_the_part_is(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    manager = start_manager()
+    node_processes("pilot", "--transition-delay", "3")
+    manager.ready()
+    code, out, err = sm_bt(capsys, "state", "set", "pilot", "configure", "--wait", "--timeout", "1")
+    assert (code, out) == (1, "")
+    assert re.fullmatch(r"sm-bt: error: not confirmed within 1 s: pilot is \w+, not inactive\n", err), err
+
+
+def test_a_change_the_manager_fails_ends_the_wait_at_once_with_its_reason(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """sm-bt manager tells a failure on /diagnostics: --wait ends then, not at its own timeout."""
+    manager = start_manager("--request-timeout", "1")
+    node_processes("pilot", "--transition-delay", "3")
+    manager.ready()
+    started = time.monotonic()
+    code, out, err = sm_bt(capsys, "mode", "set", "pilot", "f_normal_mode", "--wait", "--timeout", "30")
+    took = time.monotonic() - started
+    assert (code, out) == (1, "")
+    assert re.fullmatch(r"sm-bt: error: the manager says request #\d+ change_mode pilot f_normal_mode failed: .*"
+                        r"timed out.*: pilot is in mode '\(none\)', not 'f_normal_mode'\n", err), err
+    assert took < 15.0, f"the wait ended {took:.1f} s after the request, at its timeout rather than the failure"
+    assert manager.lines("change_mode pilot f_normal_mode", "failed")
+
+
+def test_only_the_failure_of_the_request_waited_for_ends_a_wait() -> None:
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from sm_bt.ros.client import _Watched
+
+    def status(part: str, last: str, outcome: str, node: bool = False) -> DiagnosticStatus:
+        values = {"last_request": last, "last_request_outcome": outcome, "last_request_reason": "timed out"}
+        if node:
+            values["reachable"] = "true"
+        return DiagnosticStatus(hardware_id=part, values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+    mode = _Watched("pilot", "change_mode pilot f_normal_mode")
+    message = DiagnosticArray(status=[status("amcl", "#3 change_mode pilot f_normal_mode", "failed", node=True),
+                                      status("pilot", "#4 change_mode pilot f_normal_mode", "running")])
+    assert mode.failures(message) == []
+    message.status[1] = status("pilot", "#4 change_mode pilot f_slow_mode", "failed")
+    assert mode.failures(message) == []
+    message.status[1] = status("pilot", "#4 change_mode pilot f_normal_mode", "failed")
+    assert mode.failures(message) == ["the manager says request #4 change_mode pilot f_normal_mode failed: timed out"]
+    # A node's own change_state service was asked: the manager's last request of that node is another one.
+    state = _Watched("amcl", "change_state amcl configure", systems_only=True)
+    assert state.failures(DiagnosticArray(status=[status("amcl", "#2 change_state amcl configure", "failed",
+                                                         node=True)])) == []
+    assert state.failures(DiagnosticArray(status=[status("amcl", "#2 change_state amcl configure", "failed")]))
+
+
+def test_with_no_manager_the_commands_say_what_to_check_within_the_timeout(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("ROS_DOMAIN_ID", "231")  # a domain where this test started nothing
+    started = time.monotonic()
+    code, out, err = sm_bt(capsys, "mode", "get", "pilot", "--timeout", "1.5")
+    assert time.monotonic() - started < 6.0
+    assert (code, out) == (1, "")
+    assert err == ("sm-bt: error: nothing answers /pilot/get_mode within 1.5 s: is a mode manager (`sm-bt manager "
+                   "MODEL`) running, with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?\n")
+
+
+def test_a_node_that_does_not_answer_is_told_apart_from_a_missing_manager(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    manager = start_manager()
+    node_processes("pilot", "--only", "controller_server")
+    manager.ready()
+    code, out, err = sm_bt(capsys, "state", "get", "amcl", "--timeout", "1.5")
+    assert (code, out) == (1, "")
+    assert err == ("sm-bt: error: nothing answers /amcl/get_state within 1.5 s: amcl is a node, and its mode manager "
+                   "answers but the node does not: it is not running, or the network to it is down (`sm-bt mode get "
+                   "amcl` shows what the manager knows)\n"), err
+    assert sm_bt(capsys, "state", "get", "controller_server")[1] == "controller_server: unconfigured\n"
+
+
+def test_monitor_next_to_a_running_manager_watches_and_refuses_to_act(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Two managers acting on the same nodes undo each other's changes: the monitor's --change is
+    refused (it made the change itself, silently fighting the manager), watching still works."""
+    manager = start_manager()
+    node_processes("pilot")
+    manager.ready()
+    code, out, err = sm_bt(capsys, "monitor", "pilot", "--ros", "--change", "pilot=configure", "--once")
+    assert code == 1
+    assert ("sm-bt: error: a mode manager already serves pilot, amcl, controller_server, pointcloud_to_laser, "
+            "laser_resender (/pilot/change_mode): next to it, sm-bt monitor --ros only watches; make the changes "
+            "through that manager, e.g. `sm-bt state set pilot configure --wait`") in err
+    assert sm_bt(capsys, "state", "get", "amcl")[1] == "amcl: unconfigured\n"  # nothing was touched
+    assert not manager.lines("started")
+    assert sm_bt(capsys, "state", "set", "pilot", "configure", "--wait")[0] == 0
+    code, out, err = sm_bt(capsys, "monitor", "pilot", "--ros", "--once", "--duration", "5")
+    assert code == 0, err
+    # The watcher set no target (it only observes): the row is the part and its actual state.
+    (row,) = [line.split() for line in out.splitlines() if line.split()[:1] == ["amcl"]]
+    assert row == ["amcl", "inactive"], out

@@ -1,0 +1,238 @@
+"""Liveness over real ROS 2 with the backend's own defaults: a process that stops answering (SIGSTOP
+stands in for a cut network: nothing comes back, not even DDS acknowledgements) is unreachable
+within the liveness window of its last word, with the honest reason; a change in flight on it fails
+as soon; it is re-acquired when it answers again; a node busy in a long transition of ours is not
+taken for gone."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from model_files import bundled
+from ros_processes import NodeProcess, RosContext, Starter, wait_until
+
+from sm_bt.model.states import State
+from sm_bt.ros.backend import RosBackend
+from sm_bt.ros.runtime import RosRuntime
+
+pytestmark = pytest.mark.ros
+
+#: RosBackend's defaults, which these tests are about.
+WINDOW = 0.9
+#: What the verdict may take beyond the window: the clock thread's wake-up and the report.
+LATENCY = 0.2
+NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
+#: For the processes these tests freeze: over shared memory (Fast DDS's default between local
+#: processes), a write to a frozen process's full port blocks the writer until the transport's
+#: health check gives up (about a second, again and again), which a cut network never does; over
+#: UDP a datagram to a frozen process is simply lost, as over a cut link.
+UDP_ONLY = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
+REASON = re.compile(r"no answer from /(\w+) for (?:0\.9|1\.0) s \(node exited, or network unreachable\)")
+
+
+def test_the_defaults_are_the_ones_these_tests_time() -> None:
+    import inspect
+
+    defaults = inspect.signature(RosBackend).parameters
+    assert defaults["liveness_timeout"].default == WINDOW
+    assert defaults["probe_interval"].default < WINDOW / 2
+
+
+@pytest.fixture
+def runtime() -> Iterator[RosRuntime]:
+    ros = RosRuntime(bundled("pilot"), node_name="sm_bt_liveness_test",
+                     manager_options={"rules": False, "recovery": False})
+    yield ros
+    ros.close()
+
+
+def statuses(messages: list[Any], part: str) -> list[tuple[float, Any]]:
+    """(arrival, status) of ``part`` in the DiagnosticArrays received so far."""
+    return [(arrived, status) for arrived, message in list(messages) for status in message.status
+            if status.hardware_id == part]
+
+
+def diagnostics_of(ros_context: RosContext) -> list[Any]:
+    """The /diagnostics arrays received from now on, each with its arrival time (time.monotonic)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    received: list[Any] = []
+    ros_context.node.create_subscription(DiagnosticArray, "/diagnostics",
+                                         lambda message: received.append((time.monotonic(), message)), 100)
+    return received
+
+
+def _reachable(ros: RosRuntime, names: tuple[str, ...] = ("amcl", "controller_server", "pointcloud_to_laser",
+                                                           "laser_resender")) -> None:
+    wait_until(lambda: all(ros.manager.observation(n).reachable for n in names), 15.0, "nodes not discovered")
+
+
+class Stopped:
+    """SIGSTOP a node process (started with :data:`UDP_ONLY`) now, SIGCONT when done (also when the test fails)."""
+
+    def __init__(self, process: NodeProcess) -> None:
+        assert process.pid is not None
+        self.pid = process.pid
+        os.kill(self.pid, signal.SIGSTOP)
+        self.at = time.monotonic()
+
+    def resume(self) -> None:
+        os.kill(self.pid, signal.SIGCONT)
+
+    def __enter__(self) -> Stopped:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.resume()
+
+
+def test_a_silent_process_is_unreachable_within_the_window_then_reacquired(
+        node_processes: Starter, runtime: RosRuntime) -> None:
+    nodes = node_processes("pilot", "--state", "inactive", env=UDP_ONLY)
+    _reachable(runtime)
+    manager = runtime.manager
+    with Stopped(nodes) as stopped:
+        took = wait_until(lambda: not manager.observation("amcl").reachable, 5.0, "still reachable")
+        assert took <= WINDOW + LATENCY, f"unreachable after {took:.2f} s"
+        names = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
+        # One verdict for the process: its nodes are reported one after the other, at once.
+        wait_until(lambda: not any(manager.observation(name).reachable for name in names), 0.2, "not all unreachable")
+        for name in names:
+            gone = manager.observation(name).gone
+            assert REASON.fullmatch(gone) and REASON.fullmatch(gone).group(1) == name, gone  # type: ignore[union-attr]
+        assert manager.actual("pilot").state is State.UNKNOWN
+        stopped.resume()
+        resumed = time.monotonic()
+        _reachable(runtime)
+        assert time.monotonic() - resumed < 3.0
+    assert manager.observation("amcl").state is State.INACTIVE, "live state acquired again"
+
+
+def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diagnostics_say_so(
+        node_processes: Starter, runtime: RosRuntime, ros_context: RosContext) -> None:
+    nodes = node_processes("pilot", "--state", "inactive", env=UDP_ONLY)
+    received = diagnostics_of(ros_context)
+    _reachable(runtime)
+    wait_until(lambda: statuses(received, "pilot"), 5.0, "no /diagnostics")
+    manager = runtime.manager
+    clients = {name: runtime.backend._peers[name].change_state for name in NODES}
+    with Stopped(nodes) as stopped:
+        request = manager.change_mode("pilot", "f_normal_mode")
+        assert not request.refused, "the manager did not know yet: accepted"
+        took = wait_until(lambda: request.done, 5.0, "the request did not end")
+        assert took <= WINDOW + LATENCY, f"ended {took:.2f} s after the node stopped answering (stopped at " \
+                                         f"{stopped.at:.2f})"
+        assert not request.succeeded
+        assert REASON.search(request.reason), request.reason
+        # The configure requests abandoned unanswered are dropped with their clients: a DDS writer
+        # would send them again once the node answers, and the node would configure late.
+        wait_until(lambda: not any(manager.observation(name).reachable for name in NODES), 1.0, "not all unreachable")
+        renewed = [name for name in NODES if runtime.backend._peers[name].change_state is not clients[name]]
+        assert "amcl" in renewed and "pointcloud_to_laser" not in renewed, renewed  # the latter stays inactive
+        # What the manager knows now: the change is refused as a whole, and changes nothing.
+        refused = manager.change_mode("pilot", "f_degraded_mode")
+        assert refused.refused and "not reachable" in refused.reason
+        # On the wire: the failure, once the request ended (the refusal made in this process is
+        # not a request of the ROS interface: the last request stays the failed one).
+        ERROR = b"\x02"
+
+        def failed() -> list[tuple[float, Any]]:
+            return [(arrived, status) for arrived, status in statuses(received, "pilot")
+                    if status.level == ERROR and _values(status).get("last_request_outcome") == "failed"]
+
+        wait_until(lambda: failed(), 2.0, "the failure is not on /diagnostics")
+        arrived, status = failed()[0]
+        assert arrived - stopped.at <= WINDOW + LATENCY + 0.1
+        assert REASON.search(_values(status)["last_request_reason"]), _values(status)
+        assert status.name == "sm_bt_liveness_test: pilot"
+        # Each node's verdict reaches /diagnostics with the next gathering (the request's failure went
+        # out at once, maybe before the node that did not fail it was reported).
+        wait_until(lambda: [s for _, s in statuses(received, "amcl") if s.level == ERROR], 1.0, "amcl not in ERROR")
+        amcl = [status for _, status in statuses(received, "amcl") if status.level == ERROR]
+        assert REASON.search(amcl[-1].message) and _values(amcl[-1])["reachable"] == "false"
+
+
+def _values(status: Any) -> dict[str, str]:
+    return {pair.key: pair.value for pair in status.values}
+
+
+def test_a_node_busy_in_a_long_transition_of_ours_is_not_taken_for_gone(
+        node_processes: Starter, runtime: RosRuntime) -> None:
+    # One node alone in its process: while it sleeps in on_configure, nothing of that process
+    # answers, for longer than the window.
+    node_processes("pilot", "--only", "amcl,pointcloud_to_laser,laser_resender")
+    node_processes("pilot", "--only", "controller_server", "--transition-delay", str(3 * WINDOW))
+    _reachable(runtime)
+    manager = runtime.manager
+    request = manager.change_state("controller_server", "configure")
+    wait_until(lambda: request.done, 10.0, "the request did not end")
+    assert request.succeeded, request.reason
+    assert manager.observation("controller_server").reachable
+
+
+class _AnswerLost:
+    """A service client whose requests go out as usual but whose answers never come back (as over a
+    lossy link, where the answer's datagram waits for a heartbeat): only the node's events tell."""
+
+    def __init__(self, client: Any) -> None:
+        from rclpy.task import Future
+
+        self._client, self._future_type = client, Future
+        self.srv_name = client.srv_name
+        self.sent = 0
+
+    def call_async(self, request: Any) -> Any:
+        self._client.call_async(request)
+        self.sent += 1
+        return self._future_type()  # never done
+
+    def remove_pending_request(self, future: Any) -> None:
+        pass
+
+
+def test_a_change_whose_answers_are_lost_is_confirmed_by_the_nodes_events(
+        node_processes: Starter, runtime: RosRuntime) -> None:
+    node_processes("pilot", "--state", "inactive")
+    _reachable(runtime)
+    backend, manager = runtime.backend, runtime.manager
+    lost = {}
+    for name in NODES:
+        peer = backend._peers[name]
+        lost[name] = (_AnswerLost(peer.change_state), _AnswerLost(peer.set_parameters))
+        peer.change_state, peer.set_parameters = lost[name]
+    request = manager.change_mode("pilot", "f_normal_mode")
+    wait_until(lambda: request.done, 5.0, "not confirmed without answers")
+    assert request.succeeded, request.reason
+    assert manager.actual("pilot").state_mode.mode == "f_normal_mode"
+    assert sum(client.sent for pair in lost.values() for client in pair) >= 3  # every call through a lossy client
+
+
+def test_diagnostics_are_built_only_for_a_reader_who_gets_every_part_within_the_period(
+        monkeypatch: pytest.MonkeyPatch, ros_context: RosContext) -> None:
+    from sm_bt.ros import diagnostics
+
+    built: list[list[str]] = []
+    statuses = diagnostics.DiagnosticsPublisher.statuses
+
+    def counted(self: diagnostics.DiagnosticsPublisher, parts: list[str]) -> list[diagnostics.PartStatus]:
+        built.append(parts)
+        return statuses(self, parts)
+
+    monkeypatch.setattr(diagnostics.DiagnosticsPublisher, "statuses", counted)
+    ros = RosRuntime(bundled("pilot"), node_name="sm_bt_diagnostics_test",
+                     manager_options={"rules": False, "recovery": False})
+    try:
+        time.sleep(diagnostics.PERIOD + 0.3)  # a full publication was due, and changes came (nodes unseen)
+        assert built == [], "nothing built while nobody reads /diagnostics"
+        received = diagnostics_of(ros_context)
+        wait_until(lambda: any(len(m.status) == 5 for _, m in list(received)), diagnostics.PERIOD + 1.5,
+                   "no full /diagnostics for a reader that came")
+        assert built
+    finally:
+        ros.close()

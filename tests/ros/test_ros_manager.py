@@ -1,0 +1,309 @@
+"""The ROS 2 backend and the mode manager node against real rclpy lifecycle nodes in other processes.
+
+Node processes run ``python -m sm_bt.ros.sim_nodes`` (several nodes per process); the manager runs
+embedded in the test process (``RosRuntime``) or as ``sm-bt manager`` in its own process; plain
+rclpy clients play the part of existing system_modes users.
+"""
+
+from __future__ import annotations
+
+import gc
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from harness import settle
+from lifecycle_msgs.msg import State as StateMsg
+from lifecycle_msgs.msg import Transition as TransitionMsg
+from lifecycle_msgs.msg import TransitionEvent
+from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
+from model_files import bundled
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from ros_harness import BACKEND_OPTIONS, RosHarness
+from ros_processes import NodeProcess, RosContext, Starter, call, wait_until
+from system_modes_msgs.msg import ModeEvent
+from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
+
+from sm_bt.engine.backend import CallResult, NodeReport
+from sm_bt.engine.lifecycle import Transition
+from sm_bt.model.states import State, StateMode
+from sm_bt.ros.backend import _Call
+from sm_bt.ros.runtime import RosRuntime
+
+pytestmark = pytest.mark.ros
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
+
+
+def harness(process: NodeProcess, model: str = "pilot", **options: Any) -> RosHarness:
+    return RosHarness(bundled(model), process, **options)
+
+
+@pytest.fixture
+def pilot(node_processes: Starter) -> Iterator[RosHarness]:
+    rig = harness(node_processes("pilot"))
+    yield rig
+    rig.close()
+
+
+# -- the backend: live state, transitions, parameters ----------------------------------------------
+
+
+def test_a_manager_started_after_the_nodes_picks_up_their_live_state(node_processes: Starter) -> None:
+    process = node_processes("pilot", "--state", "active")
+    rig = harness(process)
+    try:
+        for node in NODES:
+            observed = rig.manager.observation(node)
+            assert observed.state is State.ACTIVE, node
+            assert observed.lifecycle
+        assert rig.manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.3
+        assert str(rig.manager.actual("controller_server")) == "active.__DEFAULT__"
+        # Every pilot node active (pointcloud_to_laser too): no mode of the pilot has exactly that.
+        assert rig.manager.actual("pilot").state is not State.UNKNOWN
+    finally:
+        rig.close()
+
+
+def test_configure_activate_and_mode_changes_of_a_system_are_confirmed(pilot: RosHarness) -> None:
+    manager = pilot.manager
+    settle(pilot, manager.change_state("pilot", "configure"))
+    assert manager.actual("pilot").state is State.INACTIVE
+    assert {manager.observation(n).state for n in NODES} == {State.INACTIVE}
+    settle(pilot, manager.change_mode("pilot", "f_performance_mode"))
+    assert str(manager.actual("pilot")) == "active.f_performance_mode"
+    assert manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.5
+    settle(pilot, manager.change_mode("pilot", "f_energy_saving_mode"))
+    assert str(manager.actual("controller_server")) == "active.SLOW"
+    settle(pilot, manager.change_state("pilot", "deactivate"))
+    assert manager.actual("pilot").state is State.INACTIVE
+
+
+def test_the_calls_of_a_finished_change_leave_nothing_for_the_garbage_collector(pilot: RosHarness) -> None:
+    """A call's timer, future and callbacks refer back to it: kept after it finished, every call
+    of a change would be a cycle of closures for the collector (hundreds of objects a request)."""
+    manager = pilot.manager
+    gc.collect()
+    gc.disable()
+    try:
+        settle(pilot, manager.change_state("pilot", "configure"))
+        settle(pilot, manager.change_mode("pilot", "f_performance_mode"))
+        time.sleep(0.2)  # late answers and events of the change, dropped or matched
+        left = [o for o in gc.get_objects() if isinstance(o, _Call) and o.finished]
+    finally:
+        gc.enable()
+    assert left == []
+
+
+def test_a_transition_the_node_refuses_fails_with_the_reason_and_the_node_keeps_serving(pilot: RosHarness) -> None:
+    backend = pilot.runtime.backend
+    results: list[CallResult] = []
+    done = threading.Event()
+
+    def record(result: CallResult) -> None:
+        results.append(result)
+        done.set()
+
+    # amcl is unconfigured: activate is not a transition of that state (rclpy would crash on the id alone).
+    backend.change_state("amcl", Transition.ACTIVATE, record)
+    assert done.wait(5.0)
+    assert not results[0].ok and results[0].refused  # nothing ran: the caller's view was out of date
+    assert results[0].reason == "activate of amcl refused: not a transition of its state unconfigured " \
+                                "(available: configure, shutdown)"
+    settle(pilot, pilot.manager.change_mode("amcl", "__DEFAULT__"))
+    assert str(pilot.manager.actual("amcl")) == "active.__DEFAULT__"
+
+
+def test_a_transition_whose_callback_fails_fails_the_request_with_the_reason(pilot: RosHarness) -> None:
+    pilot.fail_next("amcl", Transition.CONFIGURE)
+    request = pilot.manager.change_state("amcl", "configure")
+    pilot.run_until(lambda: request.done)
+    assert not request.succeeded
+    assert "configure of amcl failed: its on_configure callback did not succeed (node now unconfigured)" \
+        in request.reason, request.reason
+
+
+def test_a_rejected_parameter_set_fails_the_request_with_the_nodes_reason(pilot: RosHarness) -> None:
+    settle(pilot, pilot.manager.change_mode("controller_server", "__DEFAULT__"))
+    pilot.reject_parameters("controller_server", "locked by the safety officer")
+    request = pilot.manager.change_mode("controller_server", "FAST")
+    pilot.run_until(lambda: request.done)
+    assert not request.succeeded
+    assert "locked by the safety officer" in request.reason
+    assert pilot.manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.3
+
+
+def test_parameters_changed_behind_the_managers_back_are_seen(pilot: RosHarness) -> None:
+    settle(pilot, pilot.manager.change_mode("controller_server", "__DEFAULT__"))
+    pilot.set_parameter("controller_server", "FollowPath.max_vel_x", 0.1)
+    pilot.run_until(lambda: pilot.manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.1)
+
+
+def test_a_plain_node_is_reported_as_such_and_cannot_change_state(node_processes: Starter) -> None:
+    process = node_processes("actuation", "--parameters-only", "manipulator", "--only", "drive_base")
+    rig = harness(process, "actuation")
+    try:
+        observed = rig.manager.observation("manipulator")
+        assert observed.reachable and not observed.lifecycle
+        actual = rig.manager.actual("manipulator")
+        assert actual.state is State.ACTIVE and actual.state_inferred, "inferred, not reported"
+        request = rig.manager.change_state("manipulator", "deactivate")
+        rig.run_until(lambda: request.done)
+        assert not request.succeeded
+        assert "no lifecycle services" in request.reason
+        # Its parameters are still managed.
+        settle(rig, rig.manager.change_mode("manipulator", "STRONG"))
+        assert rig.manager.observation("manipulator").parameters["max_torque"] == 0.2
+    finally:
+        rig.close()
+
+
+# -- crashes and restarts -----------------------------------------------------------------------------
+
+
+def test_killing_a_node_mid_change_fails_the_request_marks_it_unknown_and_recovery_restores_it(
+        node_processes: Starter, ros_context: RosContext) -> None:
+    others = node_processes("pilot", "--only", "amcl,pointcloud_to_laser,laser_resender")
+    controller = node_processes("pilot", "--only", "controller_server")
+    rig = harness(others, recovery=True, grace_period=0.5)
+    try:
+        rig.set_parameter("controller_server", "sim.transition_delay", 3.0)
+        request = rig.manager.change_mode("pilot", "f_normal_mode")
+        rig.run_until(lambda: rig.manager.observation("amcl").state is State.ACTIVE, 5.0)
+        controller.kill()
+        killed = time.monotonic()
+        rig.run_until(lambda: request.done, 15.0)
+        assert not request.succeeded
+        assert "controller_server" in request.reason, request.reason
+        rig.run_until(lambda: not rig.manager.observation("controller_server").reachable, 10.0)
+        assert time.monotonic() - killed < BACKEND_OPTIONS["call_timeout"] + BACKEND_OPTIONS["liveness_timeout"] + 1
+        assert rig.manager.actual("controller_server").state is State.UNKNOWN
+        assert rig.manager.actual("controller_server").reason, "unknown, with a reason"
+        # The manager keeps serving its interface.
+        get_state = ros_context.client(GetState, "/pilot/get_state")
+        ros_context.wait_for([get_state])
+        assert call(get_state, GetState.Request(), timeout=2.0).current_state.id == StateMsg.PRIMARY_STATE_UNKNOWN
+        # A fresh process (unconfigured, default parameters): recovery brings it back to its target.
+        controller.start()
+        rig.run_until(lambda: str(rig.manager.actual("pilot")) == "active.f_normal_mode", 20.0)
+        assert str(rig.manager.actual("controller_server")) == "active.__DEFAULT__"
+        assert rig.manager.target("controller_server") == StateMode(State.ACTIVE, "__DEFAULT__")
+    finally:
+        rig.close()
+
+
+def test_a_node_that_stops_cleanly_is_reported_gone_at_once(node_processes: Starter) -> None:
+    others = node_processes("pilot", "--only", "amcl,controller_server,pointcloud_to_laser")
+    laser = node_processes("pilot", "--only", "laser_resender")
+    rig = harness(others)
+    try:
+        laser.stop()
+        took = wait_until(lambda: not rig.manager.observation("laser_resender").reachable, 5.0, "not reported gone")
+        assert took < BACKEND_OPTIONS["liveness_timeout"] + 1.0
+        assert "left the ROS graph" in rig.manager.observation("laser_resender").gone
+    finally:
+        rig.close()
+
+
+# -- the manager node's interface, for plain rclpy clients ---------------------------------------------
+
+
+@pytest.fixture
+def manager_process(tmp_path: Path) -> Iterator[subprocess.Popen[str]]:
+    """``sm-bt manager actuation`` in its own process (SIGINT, then SIGKILL at teardown). Its log
+    goes to a file (a pipe nobody reads could fill up and block it)."""
+    log = (tmp_path / "manager.log").open("w")
+    process = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "manager", "actuation", "--grace-period", "0.5"],
+                               stdout=subprocess.PIPE, stderr=log, text=True)
+    yield process
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(3.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait(5.0)
+    log.close()
+
+
+def test_a_plain_client_changes_the_mode_of_actuation_and_sees_mode_event(
+        node_processes: Starter, manager_process: subprocess.Popen[str], ros_context: RosContext) -> None:
+    node_processes("actuation")
+    ros = ros_context
+    change_mode = ros.client(ChangeMode, "/actuation/change_mode")
+    get_mode = ros.client(GetMode, "/actuation/get_mode")
+    modes = ros.client(GetAvailableModes, "/actuation/get_available_modes")
+    change_state = ros.client(ChangeState, "/actuation/change_state")
+    get_state = ros.client(GetState, "/actuation/get_state")
+    states = ros.client(GetAvailableStates, "/actuation/get_available_states")
+    events: list[Any] = []
+    ros.node.create_subscription(ModeEvent, "/actuation/mode_event", events.append, LATCHED)
+    requests: list[Any] = []
+    ros.node.create_subscription(ModeEvent, "/actuation/mode_request_info", requests.append, LATCHED)
+    transitions: list[Any] = []
+    ros.node.create_subscription(TransitionEvent, "/actuation/transition_event", transitions.append, LATCHED)
+    ros.wait_for([change_mode, get_mode, modes, change_state, get_state, states], timeout=20.0)
+    # The manager must have found the nodes before the modes can be inferred.
+    wait_until(lambda: call(get_state, GetState.Request(), 2.0).current_state.id == StateMsg.PRIMARY_STATE_UNCONFIGURED,
+               20.0, "actuation never inferred unconfigured")
+
+    assert call(modes, GetAvailableModes.Request(), 2.0).available_modes == ["MODERATE", "PERFORMANCE", "__DEFAULT__"]
+    assert [s.label for s in call(states, GetAvailableStates.Request(), 2.0).available_states] == \
+        ["unconfigured", "inactive", "active"]
+    assert call(change_mode, ChangeMode.Request(mode_name="NO_SUCH_MODE"), 2.0).success is False
+
+    before = time.time_ns()
+    assert call(change_mode, ChangeMode.Request(mode_name="PERFORMANCE"), 2.0).success is True
+    wait_until(lambda: any(e.goal_mode.label == "PERFORMANCE" for e in events), 10.0, "no mode_event PERFORMANCE")
+    event = next(e for e in events if e.goal_mode.label == "PERFORMANCE")
+    assert event.start_mode.label != "PERFORMANCE"
+    assert event.timestamp >= before, "a real timestamp"
+    assert call(get_mode, GetMode.Request(), 2.0).current_mode == "PERFORMANCE"
+    assert any(r.goal_mode.label == "PERFORMANCE" for r in requests), "mode_request_info published"
+    assert transitions and transitions[-1].goal_state.id == StateMsg.PRIMARY_STATE_ACTIVE
+    assert transitions[-1].start_state.id != StateMsg.PRIMARY_STATE_ACTIVE
+
+    # A late joiner gets the current mode at once (latched).
+    late: list[Any] = []
+    ros.node.create_subscription(ModeEvent, "/actuation/mode_event", late.append, LATCHED)
+    wait_until(lambda: bool(late), 5.0, "a late subscriber got nothing")
+    assert late[-1].goal_mode.label == "PERFORMANCE"
+
+    # change_state by id, as the reference's clients send it.
+    request = ChangeState.Request(transition=TransitionMsg(id=TransitionMsg.TRANSITION_DEACTIVATE))
+    assert call(change_state, request, 2.0).success is True
+    wait_until(lambda: call(get_state, GetState.Request(), 2.0).current_state.id == StateMsg.PRIMARY_STATE_INACTIVE,
+               10.0, "actuation never became inactive")
+    # An id that is not a transition at all is refused, not a crash.
+    assert call(change_state, ChangeState.Request(transition=TransitionMsg(id=99)), 2.0).success is False
+    assert call(get_mode, GetMode.Request(), 2.0).current_mode == ""
+
+
+def test_the_manager_node_is_a_clean_ros_process(manager_process: subprocess.Popen[str]) -> None:
+    time.sleep(1.0)
+    manager_process.send_signal(signal.SIGINT)
+    assert manager_process.wait(5.0) == 0
+    out = manager_process.stdout.read() if manager_process.stdout else ""
+    assert "serving 1 system(s) and 2 node(s)" in out
+
+
+def test_the_runtime_reports_a_node_appearing_late(node_processes: Starter) -> None:
+    runtime = RosRuntime(bundled("actuation"), node_name="late_test", serve=False, backend_options=BACKEND_OPTIONS)
+    reports: list[NodeReport] = []
+    try:
+        runtime.manager.subscribe(lambda event: reports.append(event.actual) if event.part == "drive_base" else None)
+        time.sleep(0.3)
+        assert not runtime.manager.observation("drive_base").seen
+        node_processes("actuation", "--state", "inactive")
+        wait_until(lambda: runtime.manager.observation("drive_base").reachable, 15.0, "drive_base never appeared")
+        assert runtime.manager.observation("drive_base").state is State.INACTIVE
+        assert runtime.manager.observation("drive_base").parameters == {"max_speed": 0.1, "controller": "PID"}
+    finally:
+        runtime.close()
