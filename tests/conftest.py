@@ -36,9 +36,9 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
 
 MODELS = Path(__file__).parent / "models"
 
-# The ROS test fixtures (node_processes, ros_context; the module imports rclpy only when used) and
-# the fixture that fails a test whose requirement is missing under make test.
-pytest_plugins = ("ros_processes", "needs")
+# The ROS test fixtures (node_processes, ros_context; the module imports rclpy only when used), the
+# requirement markers, and pytest's own pytester (the simulated_system fixture is tested as users run it).
+pytest_plugins = ("ros_processes", "needs", "pytester")
 
 
 @pytest.fixture

@@ -55,6 +55,8 @@ from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue
 
 log = logging.getLogger("sm_bt.manager")
+#: Why a request fails or is refused once the manager is closed.
+CLOSED = "the manager is closed"
 
 #: The primary state each requestable transition leads to.
 _GOAL = {step.transition: step.goal for step in REQUESTABLE}
@@ -313,7 +315,7 @@ class ModeManager:
         """Stop: cancel requests in flight and timers, detach from the backend."""
         with self._entry():
             for execution in list(self._executions.values()):
-                self.finish(execution, False, "manager closed")
+                self.finish(execution, False, CLOSED)
             if self._grace_timer is not None:
                 self._grace_timer.cancel()
             self._closed = True
@@ -396,6 +398,8 @@ class ModeManager:
 
     def _start(self, part: str, target: StateMode, description: str, origin: Origin,
                timeout: float | None, transition: Transition | None = None, *, requester: str | None = None) -> Request:
+        if self._closed:  # detached from the backend: nothing it starts could ever end
+            return self._refuse(part, description, CLOSED, requester)
         implied = implied_targets(self.model, part, target)
         scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
         if origin is Origin.USER:

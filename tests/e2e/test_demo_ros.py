@@ -34,6 +34,8 @@ from tree_helpers import PILOT_DEMO_STORY, assert_in_order
 from sm_bt.cli import main
 from sm_bt.demo import Demo, Options
 
+pytestmark = pytest.mark.ros
+
 ROOT = Path(__file__).resolve().parents[2]
 #: World seconds per wall second for the tests: one patrol cycle takes about 8 s of wall time.
 SPEED = 40.0
@@ -86,11 +88,6 @@ class _TreeWatcher:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join(10.0)
-
-
-# The tests that read the one demo run below share a worker (pytest-xdist --dist loadgroup), so that it
-# runs once.
-pytestmark = pytest.mark.xdist_group("ros_demo")
 
 
 @pytest.fixture(scope="module")

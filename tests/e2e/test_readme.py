@@ -5,7 +5,8 @@ before it (``<!-- readme-test: ... -->``, invisible on the rendered page):
 
 - ``python``: run in order in one namespace (as a reader pastes them into one session), on the
   simulated backend; ``ros``: run in a fresh interpreter with the pilot's simulated rclpy nodes
-  up; ``compile (why)``: compiled only, for what needs software no package index has;
+  up; ``pytest``: a test file of a user's own, run by pytest (every test in it must pass);
+  ``compile (why)``: compiled only, for what needs software no package index has;
 - ``yaml``: loaded as a model (strictly); ``file PATH``: the file holds exactly the block and
   loads; ``part of PATH``: the block's lines appear in that order in PATH, which loads;
 - ``xml``: ``file PATH, checked against MODEL``: the file holds the block and checks clean;
@@ -48,7 +49,7 @@ DIRECTIVE = re.compile(r"^<!-- readme-test: (.*) -->$")
 #: Directives each language accepts, with what they capture; a block without one uses "".
 KINDS: dict[str, list[tuple[str, re.Pattern[str]]]] = {
     "python": [("run", re.compile(r"")), ("ros", re.compile(r"ros \(.+\)")),
-               ("compile", re.compile(r"compile \(.+\)"))],
+               ("compile", re.compile(r"compile \(.+\)")), ("pytest", re.compile(r"pytest"))],
     "yaml": [("model", re.compile(r"")), ("file", re.compile(r"file (\S+)")),
              ("part", re.compile(r"part of (\S+)"))],
     "xml": [("tree", re.compile(r"file (\S+), checked against (\S+)")),
@@ -140,6 +141,20 @@ def test_python_examples_run_in_order_on_the_simulated_backend(monkeypatch: pyte
     assert isinstance(request, sm_bt.Request) and request.succeeded, request
     assert output.count("active.f_normal_mode") == 2
     assert "[]" in output  # no divergences
+
+
+@by_line(of_kind("pytest"))
+def test_pytest_examples_pass_as_a_users_own_test_file(block: Block, tmp_path: Path) -> None:
+    """Run as a user runs them: a test file of their own, pytest started from the repository (the
+    example names the model relative to it), nothing of this suite's configuration, the plugin
+    found through its entry point."""
+    test_file = tmp_path / "test_readme_example.py"
+    test_file.write_text(block.text, encoding="utf-8")
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-c", os.devnull,
+                           "--rootdir", str(tmp_path), str(test_file)], cwd=ROOT, capture_output=True, text=True,
+                          timeout=TRANSCRIPT_TIMEOUT, check=False)
+    tests = block.text.count("\ndef test_")
+    assert done.returncode == 0 and f"{tests} passed" in done.stdout, f"{block} failed:\n{done.stdout}{done.stderr}"
 
 
 @by_line(of_kind("compile"))

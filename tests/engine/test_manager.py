@@ -208,3 +208,16 @@ def test_feedback_names_the_step(rig: SimulatedSystem) -> None:
     request = rig.manager.change_mode("actuation", "PERFORMANCE")
     rig.run(0.001)
     assert "set parameters" in request.feedback or "configure" in request.feedback
+
+
+def test_close_fails_what_is_in_flight_and_refuses_what_comes_after(rig: SimulatedSystem) -> None:
+    """A tree still ticking after the manager was closed must not wait for ever on a request that can
+    no longer end: it is refused at once, and so is a rule's or recovery's."""
+    in_flight = rig.manager.change_mode("actuation", "PERFORMANCE")
+    rig.run(0.001)
+    rig.close()
+    assert in_flight.done and not in_flight.succeeded and in_flight.reason == "the manager is closed"
+    after = rig.manager.change_mode("actuation", "PERFORMANCE")
+    assert after.refused and after.reason == "the manager is closed"
+    assert rig.manager.change_state("actuation", "configure").refused
+    assert rig.manager.change_to("actuation", "inactive").refused

@@ -265,6 +265,33 @@ def test_default_vanish_reason_and_only_running_nodes_crash() -> None:
         backend.trigger("amcl", T.CONFIGURE)
 
 
+def test_vanish_reports_the_node_gone_at_once_and_fails_its_calls() -> None:
+    backend, recorder = attached()
+    backend.set_delay("amcl", 0.5)
+    results: list[CallResult] = []
+    backend.change_state("amcl", T.CONFIGURE, results.append)
+    backend.clock.advance(0.25)
+    backend.vanish("amcl")
+    assert backend.status("amcl") is NodeStatus.VANISHED
+    assert recorder.about("amcl") == [("state", S.CONFIGURING), ("vanished", "its process ended")]
+    assert results == [CallResult(False, "node amcl vanished")]
+    backend.clock.advance(1.0)  # the callback it was in never ends
+    assert recorder.about("amcl")[2:] == [] and len(results) == 1
+    with pytest.raises(ValueError, match="cannot make node amcl vanish: it is vanished"):
+        backend.vanish("amcl")
+    backend.restart("amcl")
+    assert backend.status("amcl") is NodeStatus.RUNNING
+
+
+def test_a_crashed_node_vanishes_at_once_when_its_process_ends() -> None:
+    backend, recorder = attached(vanish_after=5.0)
+    backend.crash("amcl")
+    backend.vanish("amcl")
+    assert recorder.reports == [("vanished", "amcl", "its process ended")]
+    backend.clock.advance(10.0)  # the crash's own vanish timer is gone
+    assert len(recorder.reports) == 1
+
+
 # -- restart ---------------------------------------------------------------------------------------
 
 

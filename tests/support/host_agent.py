@@ -1,4 +1,5 @@
-"""A helper the across-hosts tests (tests/support/hosts.py) run inside a network namespace: it watches a topic, or pings.
+"""A helper the across-hosts tests (tests/support/hosts.py) run inside a network namespace: it watches
+a topic, or pings.
 
 ``python tests/support/host_agent.py watch TOPIC TYPE [--durability transient_local|volatile] [--depth 100]``
     subscribes to ``TOPIC`` (``TYPE`` as ``pkg/msg/Name``, reliable) and prints, one line each:

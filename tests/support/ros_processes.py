@@ -102,11 +102,14 @@ def remove_stale_shm_files(*, at_exit: bool = False) -> list[Path]:
     """Remove the Fast DDS files this session created that no process uses any more.
 
     Fast DDS leaves them behind after kills (and some even after clean exits). Does nothing while
-    one of our processes or a test-side context is alive; files of parallel runs (and of the other
-    xdist workers) are still mapped by their processes and are kept, and so is any file younger than
+    one of our processes or a test-side context is alive, nor in a pytest-xdist worker (the
+    controller, which starts no ROS process, removes what the workers left when it exits); files of
+    parallel runs are still mapped by their processes and are kept, and so is any file younger than
     :data:`SHM_SETTLE` (its process may not have mapped it yet). This process keeps its own port files
     mapped until it exits, so ``at_exit`` (the interpreter is ending) also removes those.
     """
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return []  # other workers' processes come and go meanwhile: the controller removes them at its exit
     with _live_lock:
         if _live_contexts or any(process.alive for process in list(_processes)):
             return []
