@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from importlib import resources
 from pathlib import Path
 
@@ -22,3 +23,15 @@ def names() -> tuple[str, ...]:
     """Names of the bundled models, sorted."""
     folder = resources.files(_PACKAGE)
     return tuple(sorted(p.name[: -len(".yaml")] for p in folder.iterdir() if p.name.endswith(".yaml")))
+
+
+def resolve(name: str | os.PathLike[str]) -> Path:
+    """The file a model argument names: an existing path, else the bundled model of that name
+    (``"pilot"``: a bare name only), else the path as given (for the caller to report missing)."""
+    candidate = Path(name)
+    if candidate.exists() or not isinstance(name, str) or os.sep in name or "/" in name:
+        return candidate
+    try:
+        return path(name)
+    except KeyError:
+        return candidate

@@ -43,7 +43,7 @@ cat build/logs/chromium.log
 
 next_step tests
 # Everything must run here: a test whose requirement (ROS, Chromium, root) is missing fails, not skips.
-SM_BT_TESTS_NEED_ALL=1 "$venv/bin/python" -m pytest -q -n "$workers" "$@"
+SM_BT_TESTS_NEED_ALL=1 "$venv/bin/python" -m pytest -q -n "$workers" --durations=10 "$@"
 
 next_step lint
 "$make" --no-print-directory lint

@@ -4,7 +4,6 @@ command, and finding and loading a model by path or bundled name."""
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -70,14 +69,9 @@ def resolve_model(name: str) -> Path:
 
     Raises :class:`CliError` when it is neither.
     """
-    candidate = Path(name)
+    candidate = bundled.resolve(name)
     if candidate.exists():
         return candidate
-    if os.sep not in name and "/" not in name:
-        try:
-            return bundled.path(name)
-        except KeyError:
-            pass
     shipped = ", ".join(bundled_names()) or "none"
     raise CliError(f"{name}: no such file, and no bundled model of that name (bundled: {shipped})")
 

@@ -19,12 +19,10 @@ pytest, the ``simulated_system`` fixture of :mod:`sm_bt.testing` makes one and c
 
 from __future__ import annotations
 
-import contextlib
 import inspect
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from types import TracebackType
 from typing import Any
 
@@ -83,13 +81,7 @@ def tick_until(tree: py_trees.trees.BehaviourTree, condition: Callable[[], bool]
 def as_model(model: Model | str | os.PathLike[str]) -> Model:
     """``model`` itself, or the model file it names (a path, or a bundled model's name: ``"pilot"``),
     loaded strictly (:class:`~sm_bt.model.errors.ModelError` when it is not valid)."""
-    if isinstance(model, Model):
-        return model
-    path = Path(model)
-    if not path.exists() and isinstance(model, str) and os.sep not in model and "/" not in model:
-        with contextlib.suppress(KeyError):  # not bundled either: load_model says the file is missing
-            path = bundled.path(model)
-    return load_model(path)
+    return model if isinstance(model, Model) else load_model(bundled.resolve(model))
 
 
 class SimulatedSystem:
