@@ -34,8 +34,8 @@ from sm_bt.model import load_model_text
 
 DOCUMENTS, MUTATIONS = 500, 1500  # files of each campaign in `make test`; 50,000 each in `make stress`
 
-#: The campaigns that ran in this process (the tally is the process's: under pytest-xdist the
-#: campaigns and the test of what they reached may run in different workers).
+#: The campaigns that ran in this process (the tally is the process's: run alone, or where a worker
+#: did not get the whole module, the test of what they reached runs what is missing).
 CAMPAIGNS_RUN: set[str] = set()
 
 
