@@ -38,7 +38,8 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
 MODELS = Path(__file__).parent / "models"
 
 # The ROS test fixtures (node_processes, ros_context; the module imports rclpy only when used), the
-# requirement markers, and pytest's own pytester (the simulated_system fixture is tested as users run it).
+# requirement markers (skips, or failures under make test), and pytest's own pytester (the
+# simulated_system fixture is tested as users run it).
 pytest_plugins = ("ros_processes", "needs", "pytester")
 
 

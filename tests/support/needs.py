@@ -1,9 +1,10 @@
 """What a test needs beyond ``pip install -e '.[test]'``, and what happens when it is missing.
 
-Three markers (registered in pyproject.toml):
+Three markers (registered here):
 
 - ``ros``: the ``ros`` extra (rclpy) and the two interface packages (tools/ensure_interfaces.sh);
-- ``browser``: a headless Chromium on PATH (tools/ensure_chromium.sh);
+- ``browser``: a headless Chromium on PATH (tools/ensure_chromium.sh) and the page's scripts
+  (``python -m sm_bt.view.assets``);
 - ``netns``: root and iproute2's ``ip``, to make network namespaces (the across-hosts tests).
 
 Where something is missing, the tests that need it are skipped, each with the reason and the fix,
@@ -31,7 +32,8 @@ NEED_ALL = "SM_BT_TESTS_NEED_ALL"
 WHAT = {
     "ros": ("ROS 2 (the ros extra and the interface packages)",
             "pip install -c constraints.txt -e '.[ros]' && tools/ensure_interfaces.sh VENV, or make test"),
-    "browser": ("Chromium", "tools/ensure_chromium.sh, or make test"),
+    "browser": ("Chromium and the page's scripts", "tools/ensure_chromium.sh and python -m sm_bt.view.assets, "
+                "or make test"),
     "netns": ("root and iproute2 (network namespaces)", "run as root with `ip` on PATH, as make test does in CI"),
 }
 #: Fixtures whose tests need ROS whether or not they carry the marker.
@@ -46,7 +48,12 @@ def missing(marker: str) -> str | None:
                    if importlib.util.find_spec(name) is None]
         return f"no {', '.join(lacking)}" if lacking else None
     if marker == "browser":
-        return None if shutil.which("chromium") or shutil.which("chromium-browser") else "no chromium on PATH"
+        from sm_bt.view.assets import missing as missing_assets
+
+        lacking = [] if shutil.which("chromium") or shutil.which("chromium-browser") else ["no chromium on PATH"]
+        if missing_assets():
+            lacking.append("the py_trees_js scripts are not extracted")
+        return "; ".join(lacking) or None
     if marker == "netns":
         if os.geteuid() != 0:
             return "not root"
@@ -84,9 +91,19 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Generator[None, p
     return report
 
 
+#: Under ``make test``: the tests whose requirement is missing, with the reason (they fail at setup).
+_unmet: dict[str, str] = {}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    for marker, (what, _) in WHAT.items():
+        config.addinivalue_line("markers", f"{marker}: needs {what} (skipped where missing; tests/support/needs.py)")
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Mark the tests that use the ROS fixtures ``ros``; skip (or, under ``make test``, fail) every
     marked test whose requirement is missing here."""
+    _unmet.clear()
     for item in items:
         if ROS_FIXTURES & set(getattr(item, "fixturenames", ())) and item.get_closest_marker("ros") is None:
             item.add_marker(pytest.mark.ros)
@@ -95,14 +112,11 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             if why is None:
                 continue
             if required():
-                item.add_marker(pytest.mark.usefixtures("_unmet_requirement"))
-                item.user_properties.append(("unmet", reason(marker, why)))
+                _unmet[item.nodeid] = reason(marker, why)
             else:
                 item.add_marker(pytest.mark.skip(reason=reason(marker, why)))
 
 
-@pytest.fixture
-def _unmet_requirement(request: pytest.FixtureRequest) -> None:
-    """Fails a test whose requirement is missing under ``make test``."""
-    unmet = [value for key, value in request.node.user_properties if key == "unmet"]
-    pytest.fail(f"{unmet[0]} ({NEED_ALL} is set: nothing may be skipped)", pytrace=False)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    if item.nodeid in _unmet:
+        pytest.fail(f"{_unmet[item.nodeid]} ({NEED_ALL} is set: nothing may be skipped)", pytrace=False)
