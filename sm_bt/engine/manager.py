@@ -39,7 +39,7 @@ from sm_bt.engine.divergences import Divergences
 from sm_bt.engine.drivers import NodeDriver
 from sm_bt.engine.events import Divergence, Event, EventKind, Observer, Outbox, Subscription
 from sm_bt.engine.executions import Execution
-from sm_bt.engine.hierarchy import Hierarchy, implied_targets
+from sm_bt.engine.hierarchy import Hierarchy, child_targets, implied_targets
 from sm_bt.engine.inference import Actual, Changes, Inference, NodeObservation
 from sm_bt.engine.lifecycle import (
     REQUESTABLE,
@@ -52,9 +52,11 @@ from sm_bt.engine.lifecycle import (
 from sm_bt.engine.reactions import FireRule, GiveUp, Reactions, Restore
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue
+from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue, SystemPart
 
 log = logging.getLogger("sm_bt.manager")
+#: How long a request may take, by default (seconds of the backend's clock).
+REQUEST_TIMEOUT = 30.0
 #: Why a request fails or is refused once the manager is closed.
 CLOSED = "the manager is closed"
 
@@ -115,7 +117,7 @@ class ModeManager:
     reactions off.
     """
 
-    def __init__(self, model: Model, backend: Backend, *, request_timeout: float = 30.0,
+    def __init__(self, model: Model, backend: Backend, *, request_timeout: float = REQUEST_TIMEOUT,
                  grace_period: float = 2.0, recovery_attempts: int = 3, recovery_window: float = 60.0,
                  rules: bool = True, recovery: bool = True) -> None:
         self.model = model
@@ -332,6 +334,7 @@ class ModeManager:
             self._renew_budgets([node])
             self._drivers[node].node_appeared(report.state)
             self._apply(self._inference.node_appeared(node, report.state, report.parameters, report.lifecycle))
+            self._new_life(node, report.state)
             if away is not None:  # what changed while it was out of reach (recovery logs what it does)
                 since, before = away
                 after = self._inference.actual(node).state_mode
@@ -339,6 +342,31 @@ class ModeManager:
                 self._returns[node] = back
                 log.info("node %s appeared: %s", node, back.describe())
             self._drivers[node].advance()
+
+    def _new_life(self, node: str, state: State) -> None:
+        """A node whose target is ``finalized`` appeared alive: it was restarted, and starts a new
+        life. Its target becomes what its system's target needs of it (the first parent with a
+        target that asks something of it, unless that is ``finalized`` too), else the state it came
+        back in; from then on it is a node like any other (requests include it, recovery restores
+        it). Without this, the manager would shut every new process of it down again."""
+        target = self._inference.target(node)
+        if target is None or target.state is not State.FINALIZED or state is State.FINALIZED:
+            return
+        wanted: StateMode | None = StateMode(state) if state.is_primary else None
+        why = "the state it came back in"
+        for parent in self._hierarchy.parents[node]:
+            parent_target = self._inference.target(parent)
+            spec = self.model.parts[parent]
+            if parent_target is None or not isinstance(spec, SystemPart):
+                continue
+            asked = dict(child_targets(spec, parent_target)).get(node)
+            if asked is not None and asked.state is not State.FINALIZED:
+                wanted, why = asked, f"what {parent}'s target {parent_target} needs"
+                break
+        log.info("node %s came back after being finalized: a new life, its target now %s (%s)", node,
+                 wanted if wanted is not None else "none", why)
+        self._set_target(node, wanted)
+        self._divergences.chosen(node, None)
 
     def _node_state(self, node: str, state: State) -> None:
         with self._entry():
@@ -438,7 +466,7 @@ class ModeManager:
         old = preempted.request
         description = f"continue #{old.id} ({old.description}) for {', '.join(sorted(nodes))}"
         request = Request(old.part, old.target, description, old.origin, self.clock.now(), withdraw=self._withdraw,
-                          requester=old.requester)
+                          requester=old.requester, parts=tuple(sorted(nodes)))
         (log.info if old.origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id,
                                                                description, request.requester)
         self._run(Execution(self, request, nodes, {}, continuation=True), None)
@@ -488,13 +516,18 @@ class ModeManager:
         self._apply(self._inference.set_target(part, target))
 
     def confirm(self, execution: Execution) -> None:
-        """The plan is done: succeed once the part's actual is the target."""
+        """The plan is done: succeed once every part the request is about is at its target (the
+        request's part at the request's target; a continuation's nodes at theirs)."""
         request = execution.request
-        actual = self._inference.actual(request.part)
-        if execution.continuation or actual.is_(request.target):
+        off = []
+        for part in request.parts:
+            wanted = self._inference.target(part) if execution.continuation else request.target
+            if wanted is not None and not self._inference.actual(part).is_(wanted):
+                off.append(part)
+        if not off:
             self.finish(execution, True, "")
-        else:
-            self._confirming.setdefault(request.part, set()).add(execution)
+        for part in off:
+            self._confirming.setdefault(part, set()).add(execution)
 
     def finish(self, execution: Execution, succeeded: bool, reason: str) -> None:
         if not execution.active:
@@ -502,9 +535,10 @@ class ModeManager:
         execution.stop()
         request = execution.request
         self._executions.pop(request.id, None)
-        waiting = self._confirming.get(request.part)
-        if waiting is not None:
-            waiting.discard(execution)
+        for part in request.parts:
+            waiting = self._confirming.get(part)
+            if waiting is not None:
+                waiting.discard(execution)
         self._divergences.busy(execution.scope, -1)
         now = self.clock.now()
         if request.origin is not Origin.USER:

@@ -22,7 +22,7 @@ from typing import Protocol
 
 from sm_bt.engine.divergences import EPSILON
 from sm_bt.engine.events import Divergence
-from sm_bt.engine.hierarchy import Hierarchy
+from sm_bt.engine.hierarchy import Hierarchy, implied_targets
 from sm_bt.engine.inference import Actual, NodeObservation
 from sm_bt.engine.requests import Origin
 from sm_bt.model.states import State, StateMode
@@ -134,14 +134,22 @@ class Reactions:
         for rule in self._model.parts[divergence.part].rules:
             condition = view.actual(rule.if_part)
             if rule.if_target == divergence.target and condition.is_(rule.if_part_state) \
-                    and not self._users_choice(rule, view):
+                    and not self._users_choice(rule, view) and not self._undoes_users_choice(rule, view):
                 return rule
         return None
+
+    def _undoes_users_choice(self, rule: Rule, view: View) -> bool:
+        """Firing the rule would re-target a part below its system that a user asked for directly (an
+        override, left alone): its new target asks something else of that part."""
+        for part, wanted in implied_targets(self._model, rule.system, rule.new_target)[1:]:
+            if view.chosen_by(part) is Origin.USER and view.target(part) != wanted:
+                return True
+        return False
 
     def _users_choice(self, rule: Rule, view: View) -> bool:
         """The rule's condition holds because a user asked for it: its part is where its target
         says, and a user chose that target (for the part, or for a system between it and the
-        rule's system). A rule never fires against that."""
+        rule's system). A rule never fires against that, nor when it would undo one (see below)."""
         part = rule.if_part
         target, actual = view.target(part), view.actual(part)
         if target is None or not actual.is_(target):

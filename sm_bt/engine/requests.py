@@ -30,10 +30,14 @@ class Request:
     done-callback; ``cancel()`` withdraws it."""
 
     def __init__(self, part: str, target: StateMode, description: str, origin: Origin, created: float,
-                 withdraw: Callable[[Request], None] | None = None, requester: str | None = None) -> None:
+                 withdraw: Callable[[Request], None] | None = None, requester: str | None = None,
+                 parts: tuple[str, ...] | None = None) -> None:
         self.id = next(_ids)
         self.part = part
         self.target = target
+        #: The parts it is about: it succeeds only with each of them at its target. ``(part,)``; for
+        #: the continuation of a preempted request, the nodes it carries on with.
+        self.parts = parts if parts is not None else (part,)
         self.description = description
         self.origin = origin
         #: Who asked, in a word: the caller's ``requester`` for a user request (``"user"`` unless

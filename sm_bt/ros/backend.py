@@ -29,12 +29,14 @@ What the reference manager does not do, and this backend does:
   The graph is looked at every
   ``poll_interval`` s while a node is missing, every ``idle_poll_interval`` s once all are present
   (``graph_interval`` for the services of present nodes: the costly part).
-  A node working on a long transition of ours blocks its other services: while every node of its
-  process is in a transition state that began after our call was sent (their last events say
-  so), only the calls' own timeout applies, as nothing tells a busy process from an unreachable
-  one. A call that the node never acknowledged with an event does not hold the verdict back, so
-  a change in flight when the network is cut fails within the window. A node
-  that leaves the graph cleanly is reported at once.
+  Busy is not gone: a node in a transition (its last event says so) blocks every service of its
+  process that shares its executor thread, for as long as its callback runs (seconds for Nav2's
+  servers). While a node of a process is in one, the process's silence is no verdict; its
+  changes are judged by ``call_timeout`` of silence instead (any answer or event of the process
+  restarts it, so a change queued behind others waits while they progress), and probes answered
+  late meanwhile do not widen the window. A process that never told of a transition (cut before
+  our call reached it) is judged by the window, so a change in flight when the network is cut
+  fails within it. A node that leaves the graph cleanly is reported at once.
 * **Either path confirms.** A transition or parameter set of ours is done when its answer comes,
   or when the node's own events show it done (its goal state; every value applied), whichever is
   first: over a lossy link each path is held back by its own lost datagrams only.
@@ -181,12 +183,10 @@ class _Peer:
     def busy(self) -> bool:
         return any(call.busy and not call.finished for call in self.calls)
 
-    @property
-    def working(self) -> bool:
-        """Blocked in a transition of ours, as far as we know: a call of ours in flight and an
-        event since it was sent says the node is in a transition state (its services wait)."""
-        return (not self.state.is_primary and self.state is not State.UNKNOWN
-                and any(call.busy and not call.finished and self.state_heard >= call.sent for call in self.calls))
+    def working(self, now: float, limit: float) -> bool:
+        """In a transition, as its last event (less than ``limit`` s ago) says: its callback runs, and
+        a lifecycle node's services wait meanwhile (Nav2's servers configure for seconds)."""
+        return not self.state.is_primary and self.state is not State.UNKNOWN and now - self.state_heard < limit
 
     def sample(self, rtt: float) -> None:
         """A round trip of a quick call (RFC 6298's smoothing)."""
@@ -209,7 +209,9 @@ class Link:
 class RosBackend:
     """The nodes of ``model``, reached through ``node`` (an rclpy node spun by an executor).
 
-    ``call_timeout`` bounds every state change and parameter set, ``acquire_timeout`` the
+    ``call_timeout`` bounds the silence of a node's process while a state change or parameter set
+    of ours is in flight (:class:`~sm_bt.ros.runtime.RosRuntime` makes it the manager's request
+    timeout: a transition may run that long), ``acquire_timeout`` the
     queries made when a node (re)appears (the first call after discovery is slow), and a node
     silent for ``liveness_timeout`` s (more on a slow link) while probed every ``probe_interval`` s
     is reported vanished. A node with parameter services but no lifecycle services for ``plain_after`` s is
@@ -690,10 +692,13 @@ class RosBackend:
         return members or [peer]
 
     def _working(self, peer: _Peer) -> bool:
-        """Every node of ``peer``'s process is busy with a transition of ours (lock held), so none
-        can answer meanwhile. One that is not busy answers for the process (executors with a
-        thread per node), and its silence is the process's."""
-        return all(member.working for member in self._members(peer))
+        """A node of ``peer``'s process is in a transition (lock held): with one executor thread for
+        the process (rclpy's and rclcpp's default), nothing of it answers until the callback
+        returns, however long it takes, so its silence is no sign of death for up to
+        ``call_timeout`` s after that node's last event. A process that never told of a transition
+        (a cut before our call reached it) is judged by the liveness window as before."""
+        now = self._clock.now()
+        return any(member.working(now, self.call_timeout) for member in self._members(peer))
 
     def _silence_verdict(self, peer: _Peer) -> None:
         """A probe went unanswered: its process is unreachable if nothing was heard from it for the
@@ -855,6 +860,16 @@ class RosBackend:
             peer.calls.add(call)
 
         def expire() -> None:
+            if busy:  # a change waits for as long as its process gives signs of life (see _working)
+                with self._lock:
+                    heard = max([call.sent, *(member.last_heard for member in self._members(peer))])
+                wait = heard + timeout - self._clock.now()
+                if wait > _SLACK and not call.finished:
+                    call.timer = self._clock.call_later(wait, expire)
+                    return
+                self._finish(call, failure=f"{label} on {peer.part}: no answer, and no word from its process "
+                                           f"for {timeout:g} s")
+                return
             self._finish(call, failure=f"{label} on {peer.part}: no answer within {timeout:g} s")
 
         if late is not None and late[0] < timeout:
@@ -885,7 +900,11 @@ class RosBackend:
             return
         with self._lock:
             now = call.peer.last_heard = self._clock.now()
-            if call.probe:  # a quick query on a warm path: the link's (and the executor's) round trip
+            # A quick query on a warm path: the link's (and the executor's) round trip, unless its
+            # process had work of ours or a transition meanwhile (queued behind a callback, the
+            # answer says nothing of the link).
+            if call.probe and not any(member.busy or member.settled >= call.sent or member.state_heard >= call.sent
+                                      for member in self._members(call.peer)):
                 call.peer.sample(now - call.sent)
         self._finish(call, response=future.result())
 

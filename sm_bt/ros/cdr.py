@@ -1,4 +1,5 @@
-"""The two messages the backend hears most, read from their serialised (CDR) bytes.
+"""The two messages the backend hears most, read from their serialised (CDR) bytes; the two the
+manager sends most, written as such.
 
 For every transition it asks for, the backend hears two ``lifecycle_msgs/TransitionEvent`` s and
 needs one field of each; for every parameter set, a ``rcl_interfaces/ParameterEvent`` (and every
@@ -12,6 +13,11 @@ fields, each aligned to its size (at most 8) from the end of the header; a strin
 length (its NUL included) and its bytes; a sequence a ``uint32`` count and its elements (no
 padding when it is empty). Anything else (another representation, bytes that end too soon)
 gives ``None``, and the caller deserialises the usual way.
+
+The manager's ``mode_event`` and ``transition_event`` messages (and the request topics of the same
+types) are written the same way, little-endian, for ``Publisher.publish`` to send as they are:
+every change is published at once (a latched topic must hold the latest true value for a reader
+that comes later), and the bytes cost a fraction of building a message for rclpy to serialise.
 """
 
 from __future__ import annotations
@@ -151,3 +157,39 @@ def _parameter_value(raw: bytes, at: int, order: int) -> tuple[ParamValue | None
     if at > len(raw):
         raise ValueError("cut short")
     return value, at
+
+
+# -- writing -------------------------------------------------------------------------------------------
+
+_LITTLE = b"\x00\x01\x00\x00"  # plain CDR, little-endian
+_PACK_U64 = struct.Struct("<Q").pack
+_PACK_U32 = struct.Struct("<I").pack
+
+
+def _put_string(out: bytearray, text: str) -> None:
+    out.extend(b"\x00" * (-(len(out) - _HEADER) % 4))
+    data = text.encode("utf-8")
+    out += _PACK_U32(len(data) + 1)
+    out += data
+    out.append(0)
+
+
+def mode_event(stamp: int, start: str, goal: str) -> bytes:
+    """A serialised ``system_modes_msgs/ModeEvent``: ``uint64 timestamp``, then the start and the goal
+    ``Mode`` (each a ``string label``)."""
+    out = bytearray(_LITTLE)
+    out += _PACK_U64(stamp)
+    _put_string(out, start)
+    _put_string(out, goal)
+    return bytes(out)
+
+
+def transition_event(stamp: int, transition: tuple[int, str], start: tuple[int, str], goal: tuple[int, str]) -> bytes:
+    """A serialised ``lifecycle_msgs/TransitionEvent``: ``uint64 timestamp``, then the ``Transition``,
+    the start and the goal ``State``, each ``(id, label)`` (a ``uint8 id`` and a ``string label``)."""
+    out = bytearray(_LITTLE)
+    out += _PACK_U64(stamp)
+    for number, label in (transition, start, goal):
+        out.append(number)
+        _put_string(out, label)
+    return bytes(out)

@@ -10,12 +10,12 @@ For every part of the model, with the reference's names and types (a drop-in for
   state or mode changes).
 
 Unlike the reference, events go out as soon as inference changes (no 1 s timer), carry their
-real start state or mode and a timestamp (ROS time, nanoseconds), and every topic is latched
-(transient local, depth 1), so a late joiner gets the current value. A topic nobody reads is not
-written: its latest message waits (built only when it goes out) and is sent once a subscriber is
-matched, within ``FLUSH_INTERVAL`` s (with 20 nodes and nothing listening, building and sending
-the request topics was a fifth of the manager's work on a change; looking for readers more often
-costs idle CPU: 0.15 % of a core at 0.2 s). ``change_mode`` and
+real start state or mode and a timestamp (ROS time, nanoseconds: when the change happened), and
+every topic is latched (transient local, depth 1). Every message is published when its change
+happens, whoever reads, so that what the topics say is true on the wire: a volatile subscriber
+gets only the changes after it subscribed, and a late transient-local one gets the current value
+first (its writer's history holds nothing older). The messages go out as CDR bytes written here
+(:mod:`sm_bt.ros.cdr`), a fraction of what building them for rclpy costs. ``change_mode`` and
 ``change_state`` answer ``success`` for an *accepted* request; confirmation comes as
 ``mode_event``/``transition_event`` (or through the behaviours). The same engine serves the
 behaviours of a mission tree in the same process.
@@ -49,28 +49,27 @@ from collections.abc import Callable
 from typing import Any
 
 from lifecycle_msgs.msg import State as StateMsg
-from lifecycle_msgs.msg import Transition as TransitionMsg
 from lifecycle_msgs.msg import TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from system_modes_msgs.msg import Mode, ModeEvent
+from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 
 from sm_bt.engine.events import Event, EventKind, Subscription
 from sm_bt.engine.inference import Actual
+from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, SystemPart
 from sm_bt.ros import removable
+from sm_bt.ros.cdr import mode_event, transition_event
 
 log = logging.getLogger("sm_bt.ros.manager_node")
 
 #: Latched: a subscriber that joins late still gets the last message.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: How often messages waiting for a reader look for one (seconds).
-FLUSH_INTERVAL = 1.0
 #: What a system's ``change_state`` can lead to (``get_available_states``).
 SYSTEM_STATES = (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE)
 
@@ -80,37 +79,6 @@ def _mode_label(actual: Actual) -> str:
     if not actual.known:
         return "unknown"
     return actual.mode or ""
-
-
-class _Latched:
-    """A latched topic written only while someone reads it: with no subscriber matched, the latest
-    message waits, unbuilt, until :meth:`flush` finds one (a late joiner gets the latest value
-    either way, as transient-local durability promises)."""
-
-    __slots__ = ("_pending", "publisher")
-
-    def __init__(self, publisher: Any) -> None:
-        self.publisher = publisher
-        self._pending: Callable[[], Any] | None = None
-
-    def publish(self, make: Callable[[], Any]) -> bool:
-        """Send ``make()`` now, or keep it for later (returns True: waiting)."""
-        if self.publisher.get_subscription_count():
-            self._pending = None
-            self.publisher.publish(make())
-            return False
-        self._pending = make
-        return True
-
-    def flush(self) -> bool:
-        """Send what waits if someone reads now; True while it still waits."""
-        if self._pending is None:
-            return False
-        if not self.publisher.get_subscription_count():
-            return True
-        make, self._pending = self._pending, None
-        self.publisher.publish(make())
-        return False
 
 
 class ModeManagerServer:
@@ -123,12 +91,10 @@ class ModeManagerServer:
         self._on_request = on_request  # told of every request made through the interface
         self._services: list[Any] = []
         self._publishers: list[Any] = []
-        self._mode_events: dict[str, _Latched] = {}
-        self._transition_events: dict[str, _Latched] = {}
-        self._mode_requests: dict[str, _Latched] = {}
-        self._transition_requests: dict[str, _Latched] = {}
-        self._waiting: set[_Latched] = set()  # topics with a message that waits for a reader
-        self._flush_timer: Any = None
+        self._mode_events: dict[str, Any] = {}
+        self._transition_events: dict[str, Any] = {}
+        self._mode_requests: dict[str, Any] = {}
+        self._transition_requests: dict[str, Any] = {}
         self._clock: Any = node.get_clock()  # a ROSClock
         # The last published values, so each event carries its real start (and none repeats).
         self._modes: dict[str, str] = {}
@@ -140,17 +106,11 @@ class ModeManagerServer:
                 self._publish_actual(name, manager.actual(name))
             self._subscription: Subscription | None = manager.subscribe(
                 self._on_event, kinds=(EventKind.ACTUAL, EventKind.TARGET))
-            self._flush_timer = manager.clock.call_later(FLUSH_INTERVAL, self._flush)
 
     def close(self) -> None:
         if self._subscription is not None:
             self._subscription.cancel()
             self._subscription = None
-        with self._manager.lock:
-            if self._flush_timer is not None:
-                self._flush_timer.cancel()
-                self._flush_timer = None
-            self._waiting.clear()
         for service in self._services:
             self._node.destroy_service(service)
         for publisher in self._publishers:
@@ -168,10 +128,10 @@ class ModeManagerServer:
             callback = _never_raising(f"{base}/{name}", answer, _failure_response(kind))
             self._services.append(node.create_service(kind, f"{base}/{name}", callback))
 
-        def publisher(kind: Any, name: str) -> _Latched:
+        def publisher(kind: Any, name: str) -> Any:
             created = removable.publisher(node, kind, f"{base}/{name}", LATCHED)
             self._publishers.append(created)
-            return _Latched(created)
+            return created
 
         service(ChangeMode, "change_mode", lambda req, res: self._change_mode(part, req, res))
         service(GetMode, "get_mode", lambda req, res: self._get_mode(part, res))
@@ -254,14 +214,13 @@ class ModeManagerServer:
             last = self._modes.get(part)
             if actual.mode != last:
                 self._modes[part] = actual.mode
-                self._publish(self._mode_events[part], _mode_event, self._stamp(), last or "", actual.mode)
+                self._mode_events[part].publish(mode_event(self._stamp(), last or "", actual.mode))
         if part in self._transition_events:
             # A system's every change of state; the first known state starts from unknown.
             previous = self._states.get(part, State.UNKNOWN)
             self._states[part] = actual.state
             if actual.state is not previous:
-                self._publish(self._transition_events[part], _transition_event, self._stamp(), previous,
-                              actual.state, None)
+                self._transition_events[part].publish(_transition_event(self._stamp(), previous, actual.state, None))
 
     def _publish_request(self, event: Event, target: StateMode) -> None:
         part = event.part
@@ -270,25 +229,11 @@ class ModeManagerServer:
         # First the state (a reference monitor reads a goal "active" there as __DEFAULT__), then
         # the mode, which corrects it.
         if event.transition is not None or target.state is not start:
-            self._publish(self._transition_requests[part], _transition_event, self._stamp(), start, target.state,
-                          event.transition)
+            self._transition_requests[part].publish(_transition_event(self._stamp(), start, target.state,
+                                                                      event.transition))
         if target.state is State.ACTIVE:
             start_mode = (before.mode if before is not None else None) or ""
-            self._publish(self._mode_requests[part], _mode_event, self._stamp(), start_mode, _target_mode(target))
-
-    def _publish(self, topic: _Latched, make: Callable[..., Any], *args: Any) -> None:
-        if topic.publish(lambda: make(*args)):
-            self._waiting.add(topic)
-        else:
-            self._waiting.discard(topic)
-
-    def _flush(self) -> None:
-        """Clock thread, every ``FLUSH_INTERVAL`` s: what waits goes to readers that came."""
-        with self._manager.lock:
-            if self._flush_timer is None:
-                return  # closed
-            self._waiting = {topic for topic in self._waiting if topic.flush()}
-            self._flush_timer = self._manager.clock.call_later(FLUSH_INTERVAL, self._flush)
+            self._mode_requests[part].publish(mode_event(self._stamp(), start_mode, _target_mode(target)))
 
     def _stamp(self) -> int:
         # ROS time: the system clock's, unless simulated time is on (a C call, not a Time object).
@@ -334,12 +279,6 @@ def _state_message(state: State) -> Any:
     return StateMsg(id=int(state), label=state.label)
 
 
-def _mode_event(stamp: int, start: str, goal: str) -> Any:
-    return ModeEvent(timestamp=stamp, start_mode=Mode(label=start), goal_mode=Mode(label=goal))
-
-
-def _transition_event(stamp: int, start: State, goal: State, transition: Any) -> Any:
-    message = TransitionEvent(timestamp=stamp, start_state=_state_message(start), goal_state=_state_message(goal))
-    if transition is not None:
-        message.transition = TransitionMsg(id=int(transition), label=transition.label)
-    return message
+def _transition_event(stamp: int, start: State, goal: State, transition: Transition | None) -> bytes:
+    return transition_event(stamp, (int(transition), transition.label) if transition is not None else (0, ""),
+                            (int(start), start.label), (int(goal), goal.label))

@@ -50,7 +50,7 @@ from typing import Any
 
 from sm_bt.engine.backend import CallResult
 from sm_bt.engine.clock import WallClock
-from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.manager import REQUEST_TIMEOUT, ModeManager
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.ros.environment import prepare, require_ros
 
@@ -74,8 +74,8 @@ class RosRuntime:
     """Manage ``model``'s nodes over ROS 2 from this process.
 
     ``manager_options`` go to :class:`ModeManager` (``grace_period``, ``request_timeout``, ...),
-    ``backend_options`` to :class:`~sm_bt.ros.backend.RosBackend` (``call_timeout``,
-    ``liveness_timeout``, ...). ``serve=False`` leaves out the ROS services and topics (the
+    ``backend_options`` to :class:`~sm_bt.ros.backend.RosBackend` (``liveness_timeout``, ...;
+    ``call_timeout`` is the request timeout unless given). ``serve=False`` leaves out the ROS services and topics (the
     behaviours alone). ``own_domain`` is for self-contained runs (demo, tests): a per-run
     ``ROS_DOMAIN_ID`` and discovery on this machine unless set; otherwise the user's settings (and
     ROS's defaults) apply, so nodes and manager may run on different machines.
@@ -137,9 +137,13 @@ class RosRuntime:
         spun = [(self.executor, self.node, "executor")] if self._owns_node else []
         spun += [(self.backend_executor, self.backend_node, "backend"), (self.watch_executor, self.watch_node, "watch")]
         self._spinners = [_Spinner(executor, node, name, self.context) for executor, node, name in spun]
-        self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node,
-                                  **dict(backend_options or {}))
-        self.manager = ModeManager(model, self.backend, **dict(manager_options or {}))
+        managing = dict(manager_options or {})
+        backing = dict(backend_options or {})
+        # A change of a node may take as long as the request it serves: a node busy in a long
+        # transition answers nothing meanwhile (see RosBackend).
+        backing.setdefault("call_timeout", managing.get("request_timeout", REQUEST_TIMEOUT))
+        self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node, **backing)
+        self.manager = ModeManager(model, self.backend, **managing)
         # The manager's view for operators and aggregators, with the interface it serves.
         self.diagnostics = DiagnosticsPublisher(self.node, self.manager, self.clock,
                                                 link=self.backend.link) if serve else None

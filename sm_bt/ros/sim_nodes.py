@@ -314,6 +314,7 @@ def run_nodes(
     initial_state: str = "unconfigured",
     parameters_only: Collection[str] = (),
     transition_delay: float = 0.0,
+    single_threaded: bool = False,
     ready: Callable[[list[str]], None] | None = print_ready,
     stop: threading.Event | None = None,
 ) -> None:
@@ -321,7 +322,9 @@ def run_nodes(
 
     The lifecycle nodes are first brought to ``initial_state``; ``ready`` then gets their fully
     qualified names (lifecycle first, then plain); ``transition_delay`` is every lifecycle node's
-    first ``sim.transition_delay``. Without ``stop``, SIGINT and SIGTERM end the
+    first ``sim.transition_delay``. ``single_threaded``: one executor thread for all the nodes, as in
+    rclcpp's component container, so that a node in a long transition holds up the others (by
+    default each node has a thread). Without ``stop``, SIGINT and SIGTERM end the
     run (this needs the main thread). Shutdown order: executor, its thread, the nodes, the context.
     ``ValueError`` for unknown names or states.
     """
@@ -349,8 +352,9 @@ def run_nodes(
         for managed in lifecycle:
             managed.bring_to(initial_state)
         # One thread per node: each node's callbacks are mutually exclusive (its default group),
-        # so a node sleeping in sim.transition_delay never holds up another node.
-        executor = MultiThreadedExecutor(num_threads=len(nodes) + 1, context=context)
+        # so a node sleeping in sim.transition_delay never holds up another node. With one thread,
+        # it holds up every node of the process.
+        executor = MultiThreadedExecutor(num_threads=1 if single_threaded else len(nodes) + 1, context=context)
         for node in nodes:
             executor.add_node(node)
         spinner = threading.Thread(target=_spin, args=(executor, stop, failure), name="sim-nodes", daemon=True)
@@ -423,6 +427,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="run these nodes as plain nodes: parameters, no lifecycle services")
     parser.add_argument("--transition-delay", type=non_negative, default=0.0, metavar="SECONDS",
                         help="seconds every transition takes (the nodes' first sim.transition_delay; default 0)")
+    parser.add_argument("--single-threaded", action="store_true",
+                        help="one executor thread for all the nodes, as in a component container: a node in a "
+                             "transition holds up the others (default: a thread per node)")
     args = parser.parse_args(argv)
     environment.prepare(local_only=False)  # stand-ins for a robot's nodes: the user's discovery settings
     try:
@@ -440,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         run_nodes(model, args.only, initial_state=args.state, parameters_only=args.parameters_only,
-                  transition_delay=args.transition_delay)
+                  transition_delay=args.transition_delay, single_threaded=args.single_threaded)
     except (NameValidationException, ParameterException) as error:  # a part or parameter name ROS refuses
         print(f"{PROG}: error: {args.model}: {error}", file=sys.stderr)
         return 2

@@ -314,6 +314,60 @@ def test_a_request_that_needs_a_finalized_node_is_refused_and_changes_nothing() 
     assert rig.finish(rig.manager.change_mode("controller_server", "FAST")).succeeded
 
 
+# -- restarted nodes -------------------------------------------------------------------------------
+
+
+def test_a_node_restarted_after_being_finalized_rejoins_its_system_instead_of_being_shut_down_again() -> None:
+    """The operator's view: a node shut down, its process restarted. Before, the manager shut the
+    fresh node down again within a second (its target was still finalized) and every later request
+    of its system was refused ("finalized (it must be restarted)") until the manager itself was
+    restarted."""
+    rig = SimulatedSystem(bundled("pilot"), grace_period=0.5)
+    assert rig.finish(rig.manager.change_mode("pilot", "f_normal_mode")).succeeded
+    assert rig.finish(rig.manager.change_state("controller_server", "shutdown")).succeeded
+    assert str(rig.manager.actual("controller_server")) == "finalized"
+    refused = rig.manager.change_mode("pilot", "f_degraded_mode")
+    assert refused.refused and refused.reason == "controller_server is finalized (it must be restarted)"
+    rig.restart("controller_server")
+    rig.run(0.01)
+    # A new life: what pilot's target needs of it, not the finalized one.
+    assert rig.manager.target("controller_server") == StateMode(State.ACTIVE, "__DEFAULT__")
+    rig.run(5.0)
+    assert str(rig.manager.actual("controller_server")) == "active.__DEFAULT__"
+    assert rig.backend.node("controller_server").state is State.ACTIVE  # never shut down again
+    request = rig.finish(rig.manager.change_mode("pilot", "f_degraded_mode"))
+    assert request.succeeded, request.reason
+    assert str(rig.manager.actual("pilot")) == "active.f_degraded_mode"
+
+
+def test_a_node_restarted_in_a_finalized_system_keeps_the_state_it_came_back_in() -> None:
+    """When its system was shut down too, nothing asks anything of the new process but itself: its
+    target is the state it came back in, and the system is reachable again once every node is back."""
+    rig = SimulatedSystem(fixture("nested"), grace_period=0.5)
+    assert rig.finish(rig.manager.change_mode("robot", "WORK")).succeeded
+    assert rig.finish(rig.manager.change_state("robot", "shutdown")).succeeded
+    rig.restart("lidar")
+    rig.run(5.0)
+    assert rig.manager.target("lidar") == StateMode(State.UNCONFIGURED)
+    assert rig.backend.node("lidar").state is State.UNCONFIGURED
+    refused = rig.manager.change_mode("robot", "WORK")
+    assert refused.refused and "is finalized (it must be restarted)" in refused.reason
+    for node in ("drive", "arm"):
+        rig.restart(node)
+    request = rig.finish(rig.manager.change_mode("robot", "WORK"))
+    assert request.succeeded, request.reason
+
+
+def test_a_node_restarted_in_another_state_after_its_system_was_shut_down_can_be_asked_for_again() -> None:
+    rig = SimulatedSystem(bundled("pilot"), grace_period=0.5)
+    assert rig.finish(rig.manager.change_state("pilot", "shutdown")).succeeded
+    rig.restart("amcl", "inactive")
+    rig.run(2.0)
+    assert rig.manager.target("amcl") == StateMode(State.INACTIVE)
+    assert rig.finish(rig.manager.change_mode("amcl", "DEGRADED")).succeeded
+    assert rig.events_of(EventKind.TARGET, "amcl")[-1].target == StateMode(State.ACTIVE, "DEGRADED")
+
+
 def test_a_divergence_a_request_works_on_is_announced_when_it_starts_and_ends_not_per_report() -> None:
     """While a request drives pilot's four nodes, each report moves pilot's actual (and the
     divergence's reason): that shows in ACTUAL events; the divergence itself is announced when it

@@ -1,7 +1,8 @@
 """What the backend reads from serialised events is what rclpy serialised: the goal state of a
 TransitionEvent, and the node and values of a ParameterEvent, for every value type, label and
 name length (the alignment of what follows a string depends on its length) and both byte orders;
-other encodings and cut bytes give None, and the backend deserialises those the usual way."""
+other encodings and cut bytes give None, and the backend deserialises those the usual way. What
+the manager writes as bytes (its ModeEvent and TransitionEvent messages) is what rclpy reads."""
 
 from __future__ import annotations
 
@@ -16,8 +17,9 @@ from lifecycle_msgs.msg import Transition as TransitionMsg
 from lifecycle_msgs.msg import TransitionEvent
 from rcl_interfaces.msg import Parameter, ParameterEvent, ParameterType, ParameterValue
 from rclpy.serialization import deserialize_message, serialize_message
+from system_modes_msgs.msg import ModeEvent
 
-from sm_bt.ros.cdr import goal_state_id, parameter_event_node, parameter_event_values
+from sm_bt.ros.cdr import goal_state_id, mode_event, parameter_event_node, parameter_event_values, transition_event
 from sm_bt.ros.parameters import from_parameters
 
 pytestmark = pytest.mark.ros
@@ -43,6 +45,32 @@ def test_the_goal_state_is_read_where_rclpy_wrote_it(transition: int, transition
                                                       stamp: int) -> None:
     assert goal_state_id(_transition_event(transition, transition_label, start, start_label, goal, goal_label,
                                            stamp)) == goal
+
+
+# Any Unicode but NUL (labels are UTF-8 on the wire; a ROS string ends at its first NUL, and the loader
+# refuses one in a name).
+any_text = st.text(alphabet=st.characters(blacklist_characters="\x00"), max_size=24)
+stamps = st.integers(min_value=0, max_value=2**64 - 1)
+
+
+@examples(200)
+@given(stamps, any_text, any_text)
+def test_a_written_mode_event_is_the_message_rclpy_reads(stamp: int, start: str, goal: str) -> None:
+    message = deserialize_message(mode_event(stamp, start, goal), ModeEvent)
+    assert (message.timestamp, message.start_mode.label, message.goal_mode.label) == (stamp, start, goal)
+
+
+@examples(200)
+@given(stamps, ids, any_text, ids, any_text, ids, any_text)
+def test_a_written_transition_event_is_the_message_rclpy_reads(stamp: int, transition: int, transition_label: str,
+                                                               start: int, start_label: str, goal: int,
+                                                               goal_label: str) -> None:
+    raw = transition_event(stamp, (transition, transition_label), (start, start_label), (goal, goal_label))
+    message = deserialize_message(raw, TransitionEvent)
+    assert (message.timestamp, message.transition.id, message.transition.label, message.start_state.id,
+            message.start_state.label, message.goal_state.id, message.goal_state.label) == \
+        (stamp, transition, transition_label, start, start_label, goal, goal_label)
+    assert goal_state_id(raw) == goal  # the backend reads ours as it reads the nodes'
 
 
 def test_a_big_endian_transition_event_is_read_too() -> None:

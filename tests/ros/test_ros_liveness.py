@@ -176,6 +176,67 @@ def test_a_node_busy_in_a_long_transition_of_ours_is_not_taken_for_gone(
     assert manager.observation("controller_server").reachable
 
 
+def _vanished(manager: Any) -> list[str]:
+    """Every node-vanished event of ``manager`` from now on (a list that fills as they come)."""
+    seen: list[str] = []
+    manager.subscribe(lambda event: seen.append(event.message) if "vanished" in event.message else None)
+    return seen
+
+
+@pytest.mark.parametrize(("model", "args", "switch"), [
+    # Each node a thread: the four configure at once, 3 s each (the reported failure: all four gone).
+    ("pilot", ("--transition-delay", "3"), ("pilot", "f_degraded_mode")),
+    # One thread for the process, as in a component container: each transition waits for the one
+    # before, and nothing of the process answers for 3 s at a time, 12 s in all.
+    ("actuation", ("--transition-delay", "3", "--single-threaded"), ("actuation", "MODERATE")),
+], ids=["thread per node", "one thread"])
+def test_nodes_whose_transitions_take_seconds_are_busy_not_gone(
+        node_processes: Starter, model: str, args: tuple[str, ...], switch: tuple[str, str]) -> None:
+    """The runtime's defaults (a call may take as long as its request, 30 s), the liveness window of
+    0.9 s: brought up and switched, no node is declared gone, and the window did not learn the slow
+    answers (they said nothing of the link: the process was busy)."""
+    ros = RosRuntime(bundled(model), node_name="sm_bt_busy_test", manager_options={"rules": False,
+                                                                                   "recovery": False})
+    try:
+        node_processes(model, *args)
+        names = tuple(node.name for node in ros.model.nodes)
+        _reachable(ros, names)
+        vanished = _vanished(ros.manager)
+        system = switch[0]
+        bring_up = ros.manager.change_mode(system, "__DEFAULT__")
+        wait_until(lambda: bring_up.done, 30.0, "the bring-up did not end")
+        assert bring_up.succeeded, bring_up.reason
+        change = ros.manager.change_mode(*switch)
+        wait_until(lambda: change.done, 30.0, "the switch did not end")
+        assert change.succeeded, change.reason
+        assert vanished == []
+        assert all(not ros.backend.link(name).slow for name in names), [ros.backend.link(n) for n in names]
+    finally:
+        ros.close()
+
+
+def test_a_process_killed_in_a_long_transition_is_told_and_its_change_fails(node_processes: Starter) -> None:
+    """Busy excuses silence, not death: the node's services leave the ROS graph when DDS drops the
+    dead process, and that is the verdict (a request that waits for it fails then, with the reason)."""
+    ros = RosRuntime(bundled("actuation"), node_name="sm_bt_killed_test",
+                     manager_options={"rules": False, "recovery": False, "request_timeout": 120.0})
+    try:
+        nodes = node_processes("actuation", "--only", "drive_base", "--transition-delay", "60")
+        _reachable(ros, ("drive_base",))
+        request = ros.manager.change_state("drive_base", "configure")
+        wait_until(lambda: ros.manager.observation("drive_base").state is State.CONFIGURING, 5.0, "not configuring")
+        assert nodes.pid is not None
+        os.kill(nodes.pid, signal.SIGKILL)
+        killed = time.monotonic()
+        took = wait_until(lambda: request.done, 60.0, "the request did not end")
+        assert not request.succeeded and "drive_base" in request.reason, request.reason
+        assert not ros.manager.observation("drive_base").reachable
+        print(f"killed in a transition: the request failed {took:.1f} s later ({request.reason})")
+        assert time.monotonic() - killed < 60.0
+    finally:
+        ros.close()
+
+
 class _AnswerLost:
     """A service client whose requests go out as usual but whose answers never come back (as over a
     lossy link, where the answer's datagram waits for a heartbeat): only the node's events tell."""

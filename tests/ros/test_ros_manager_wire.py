@@ -30,6 +30,8 @@ pytestmark = pytest.mark.ros
 
 #: As the manager publishes: a subscriber that joins late still gets the last message.
 LATCHED = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: As the reference's publishers and most clients: volatile, depth 1.
+VOLATILE = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
 #: The first call after discovery can take a while; later ones are fast.
 CALL_TIMEOUT = 3.0
@@ -208,7 +210,7 @@ def test_transition_request_info_carries_the_requested_transition_and_comes_befo
 
 def test_what_nobody_read_when_it_changed_reaches_a_reader_that_comes_later(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext) -> None:
-    # The manager writes a topic only while someone reads it; the latest message waits for a reader.
+    # A reader that comes late gets the latest message of each topic, and nothing older.
     manager = start_manager("--log-level", "warning")
     node_processes("pilot")
     manager.ready()
@@ -237,6 +239,56 @@ def test_what_nobody_read_when_it_changed_reaches_a_reader_that_comes_later(
     assert pairs(topics["/amcl/mode_event"]) == [("", "__DEFAULT__")]  # active (its default) in both
     for messages in topics.values():
         assert before <= messages[0].timestamp <= came
+
+
+def test_a_volatile_reader_hears_only_what_happens_after_it_subscribed(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext) -> None:
+    """As most clients subscribe (the reference's own publishers are volatile, depth 1): before, a
+    reader that came while the pilot sat in __DEFAULT__ got '' -> __DEFAULT__ about a second later,
+    an event from before it subscribed, and acted on a change that did not happen."""
+    manager = start_manager("--log-level", "warning")
+    node_processes("pilot")
+    manager.ready()
+    ros = ros_context
+    wait_for_pilot(ros)
+    assert change_mode(ros, "pilot", "__DEFAULT__") is True
+    wait_for_mode(ros, "pilot", "__DEFAULT__")
+    received: list[Any] = []
+    subscription = ros.node.create_subscription(ModeEvent, "/pilot/mode_event", received.append, VOLATILE)
+    wait_until(lambda: subscription.get_publisher_count() > 0, 20.0, "/pilot/mode_event never matched")
+    time.sleep(1.5)  # longer than the old wait for a reader
+    assert received == [], pairs(received)
+    asked = time.time_ns()
+    assert change_mode(ros, "pilot", "f_degraded_mode") is True
+    wait_until(lambda: received, 10.0, "no mode_event for the change")
+    time.sleep(0.3)
+    assert pairs(received) == [("__DEFAULT__", "f_degraded_mode")]
+    assert asked <= received[0].timestamp <= time.time_ns()
+
+
+def test_a_late_latched_reader_gets_the_current_value_first_not_an_older_one(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext) -> None:
+    """Before, a topic whose reader left kept its last message in the writer's history while newer
+    ones waited unsent: a reader that came later got that stale one first (configuring -> inactive
+    while the pilot was active), and the current one after."""
+    manager = start_manager("--log-level", "warning")
+    node_processes("pilot")
+    manager.ready()
+    ros = ros_context
+    wait_for_pilot(ros)
+    first: list[Any] = []
+    reader = ros.node.create_subscription(TransitionEvent, "/pilot/transition_event", first.append, LATCHED)
+    wait_until(lambda: reader.get_publisher_count() > 0, 20.0, "/pilot/transition_event never matched")
+    assert change_state(ros, "pilot", TransitionMsg.TRANSITION_CONFIGURE) is True
+    wait_for_pilot(ros, StateMsg.PRIMARY_STATE_INACTIVE)
+    wait_until(lambda: [m for m in first if m.goal_state.label == "inactive"], 5.0, "the first reader heard nothing")
+    ros.node.destroy_subscription(reader)  # the reader leaves
+    assert change_mode(ros, "pilot", "f_degraded_mode") is True
+    wait_for_mode(ros, "pilot", "f_degraded_mode")
+    late = latched(ros, TransitionEvent, "/pilot/transition_event")
+    wait_until(lambda: late, 5.0, "the late reader got nothing")
+    time.sleep(0.5)
+    assert [(m.start_state.label, m.goal_state.label) for m in late] == [("activating", "active")]
 
 
 # -- 9: what the manager logs when a node dies ------------------------------------------------------------

@@ -36,6 +36,9 @@ holds the scenario as Python, ready to paste into ``test_manager_regressions.py`
   re-targeting it is a fault for the systems above, and their rules react. (A state the user
   asked for explicitly is left alone, as the README says.)
 
+* **I10** a request succeeds only with every part it is about (``Request.parts``: its part, or a
+  continuation's nodes) at its target at that moment.
+
 A scenario may also name a node that is expected to be *given up* by the end of its steps
 (``expect_given_up``, a node hung in a transition with recovery on): then I6 also requires that
 nothing is in flight on it and that its divergence is reported as an error with a reason.
@@ -318,6 +321,10 @@ class I9RefusalChangesNothing(InvariantViolation):
     code = "I9"
 
 
+class I10SuccessIsExact(InvariantViolation):
+    code = "I10"
+
+
 @dataclass
 class Stats:
     """What ``make stress`` sums up over every scenario run."""
@@ -382,6 +389,7 @@ class _Seen:
     announced: bool = False  # the manager told its observers it started: it was accepted
     expect_refusal: bool = False  # invalid by name: must be refused at once
     finished_actual: StateMode | None = None  # the part's actual when it finished
+    registered_running: bool = True  # its done-callback was added before it ended (I10)
 
 
 @dataclass
@@ -460,7 +468,8 @@ class _Runner:
             self.seen[event.request.id].announced = True
         elif event.request is not None:
             request = event.request
-            self.seen[request.id] = _Seen(request, self.options.request_timeout, announced=True)
+            self.seen[request.id] = _Seen(request, self.options.request_timeout, announced=True,
+                                          registered_running=not request.done)
             request.add_done_callback(self._finished)
             self.set_by[request.part] = request.origin
             if request.origin is Origin.USER:
@@ -468,6 +477,14 @@ class _Runner:
                     budget.count = 0
             elif request.origin is Origin.RECOVERY:
                 self._restored(request.part, event.time)
+        request = event.request
+        if event.kind is EventKind.REQUEST and request is not None and request.succeeded \
+                and not event.message.endswith("started") and request.parts == (request.part,) \
+                and event.actual is not None and not event.actual.is_(request.target):
+            # I10: the event announcing the success tells the part's actual at that moment.
+            self._violate(I10SuccessIsExact, f"t={event.time:.3f}: request #{request.id} {request.description} "
+                                             f"[{request.origin.value}] succeeded while {request.part} was "
+                                             f"{event.actual}, not {request.target}")
         if event.kind is EventKind.RULE:
             self.rules_fired += 1
         elif event.kind is EventKind.FAILED:
@@ -483,6 +500,15 @@ class _Runner:
         seen = self.seen.get(request.id)
         if seen is not None and request.part in self.model.parts:
             seen.finished_actual = self.manager.actual(request.part).state_mode
+        # I10 for a continuation's nodes, when the runner heard of it before it ended (its own part is
+        # judged from the event that announces the success, see _on_event).
+        if request.succeeded and seen is not None and seen.registered_running:
+            for part in request.parts:
+                wanted, actual = self.manager.target(part), self.manager.actual(part)
+                if request.parts != (request.part,) and wanted is not None and not actual.is_(wanted):
+                    self._violate(I10SuccessIsExact, f"t={self.clock.now():.3f}: request #{request.id} "
+                                                     f"{request.description} [{request.origin.value}] succeeded "
+                                                     f"while {part} was {actual}, not {wanted}")
 
     def _track(self, part: str, now: float) -> None:
         actual, target = self.actuals[part], self.targets[part]
@@ -642,11 +668,14 @@ class _Runner:
 
     def heal(self) -> None:
         """Stop the faults (disarm, clear rejections) and bring every node process back (crashed,
-        vanished, hung or not started yet), at once: what is under way goes on."""
+        vanished, hung, finalized or not started yet), at once: what is under way goes on. Then no
+        node is out of reach, and I3 holds the final request to reaching its target: no state of
+        the model and the nodes may lock a user out (a finalized node that comes back is a new life)."""
         backend = self.backend
         backend.clear_faults()
         for node in backend.nodes:
-            if backend.status(node) is not NodeStatus.RUNNING or node in backend.hung():
+            if backend.status(node) is not NodeStatus.RUNNING or node in backend.hung() \
+                    or backend.node(node).state is State.FINALIZED:
                 self._restart(node, renew=True)
 
     def settle(self, when: str) -> bool:
@@ -678,28 +707,36 @@ class _Runner:
         # A node restarted by the healing whose report is still on its way (report_delay) is gone
         # as far as the manager can know: a request made now may be refused for it.
         # Likewise a node the manager still sees finalized.
+        # And a node whose first report is still on its way: the manager may yet hear of the process
+        # the healing replaced (finalized, say) before it hears of the new one.
         unseen = {node for node in needed if self.manager.observation(node).gone
+                  or not self.manager.observation(node).seen
                   or self.manager.observation(node).state is State.FINALIZED}
         request = self.request(final, FINAL_TIMEOUT)
         self.advance(self.clock.now() + FINAL_TIMEOUT + 1.0, stop=lambda: request.done)
         missing = [node for node, wanted in needed.items()
                    if (self.backend.is_plain(node) and wanted.state is not State.ACTIVE)
-                   or (node in doomed and self.backend.node(node).state is State.FINALIZED)
-                   or node in unseen]
-        self.check_final(request, not missing, missing)
+                   or (node in doomed and self.backend.node(node).state is State.FINALIZED)]
+        self.check_final(request, not missing, missing, sorted(unseen - set(missing)))
         self.settle("after the final request")
         self.check_requests()
         self.check_observations()
 
     # -- invariants --------------------------------------------------------------------------------
 
-    def check_final(self, request: Request, reachable: bool, missing: list[str]) -> None:
+    def check_final(self, request: Request, reachable: bool, missing: list[str], doubtful: list[str]) -> None:
         """I3. ``missing``: the needed nodes the target cannot have (every node runs after healing):
-        finalized, or on the way there, when the request was made; plain ones asked for a state."""
+        finalized, or on the way there, when the request was made; plain ones asked for a state.
+        ``doubtful``: nodes whose news was still on its way to the manager then (it may refuse or
+        fail the request for them, naming them, or reach the target once it hears)."""
         actual = self.manager.actual(request.part) if request.part in self.model.parts else None
         where = f"final request #{request.id} {request.description}"
         if not request.done:
             self._violate(I3LastRequestWins, f"{where} is not done after {FINAL_TIMEOUT:g} s")
+        elif reachable and doubtful and not request.succeeded:
+            if not any(name in request.reason for name in (request.part, *doubtful)):
+                self._violate(I3LastRequestWins, f"{where} failed with a reason that names neither the part nor "
+                                                 f"{', '.join(doubtful)}: {request.reason!r}")
         elif reachable and not request.succeeded:
             self._violate(I3LastRequestWins, f"{where} failed although its target is reachable: {request.reason}")
         elif reachable and self.seen[request.id].finished_actual != request.target:
@@ -707,9 +744,9 @@ class _Runner:
                                              f"{self.seen[request.id].finished_actual} then, not {request.target}")
         elif not reachable and request.succeeded:
             self._violate(I3LastRequestWins, f"{where} succeeded although {', '.join(missing)} cannot be had")
-        elif not reachable and not any(name in request.reason for name in (request.part, *missing)):
+        elif not reachable and not any(name in request.reason for name in (request.part, *missing, *doubtful)):
             self._violate(I3LastRequestWins, f"{where} failed with a reason that names neither the part nor "
-                                             f"{', '.join(missing)}: {request.reason!r}")
+                                             f"{', '.join([*missing, *doubtful])}: {request.reason!r}")
         if request.succeeded and actual is not None:
             later = self.manager.actual(request.part)
             if later.state_mode != request.target and self.manager.target(request.part) != request.target:
