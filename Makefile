@@ -45,14 +45,15 @@ test:
 # (tests/model/test_model_fuzz.py) with the hypothesis `stress` profile: at least 10,000 scenarios and
 # 100,000 model files, then a summary (requests by outcome, recoveries, rules, files by outcome);
 # 30 partition/heal cycles across two hosts (tests/e2e/stress_partitions.py: network namespaces, root),
-# and nodes whose transitions take 30 s brought up over ROS 2 (tests/e2e/stress_long_transitions.py).
+# nodes whose transitions take 30 s brought up over ROS 2 (tests/e2e/stress_long_transitions.py), and
+# 10,000 interleavings of subscriptions and changes on the manager's topics (tests/ros/test_ros_topics_property.py).
 .PHONY: stress
 stress: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
 	SM_BT_TESTS_NEED_ALL=1 SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests/support \
 		$(BIN)/python -m pytest -q -s -p stress_summary \
 		tests/engine/test_manager_properties.py tests/model/test_model_fuzz.py tests/e2e/stress_partitions.py \
-		tests/e2e/stress_long_transitions.py
+		tests/e2e/stress_long_transitions.py tests/ros/test_ros_topics_property.py
 
 # The performance goals (README, "Performance"): a table with each goal, build/bench/results.json
 # and build/bench/scaling.png; exit status 1 if a goal is not met. About 3 minutes on 2 cores.
