@@ -22,6 +22,8 @@ import py_trees
 from py_trees.ports import PortInformation, PortsMixin
 
 from sm_bt.engine.manager import ModeManager
+from sm_bt.model.diagnostics import did_you_mean
+from sm_bt.model.errors import Error, RequestError
 from sm_bt.model.types import DEFAULT_MODE, Model
 
 #: What sm_bt's behaviours say they are when they ask the manager for a change
@@ -29,7 +31,7 @@ from sm_bt.model.types import DEFAULT_MODE, Model
 REQUESTER = "tree"
 
 
-class NotSetUp(RuntimeError):
+class NotSetUp(Error, RuntimeError):
     """A behaviour needed its mode manager and none was given (see the module's three ways)."""
 
 
@@ -72,10 +74,11 @@ def attached_manager(behaviour: py_trees.behaviour.Behaviour) -> ModeManager | N
 
 
 def require_mode_name(behaviour: str, part: str, mode: str) -> None:
-    """``ValueError`` for an empty mode name: ``__DEFAULT__`` is the explicit name of the default."""
+    """:class:`~sm_bt.RequestError` for an empty mode name: ``__DEFAULT__`` is the explicit name of the
+    default."""
     if not mode:
-        raise ValueError(f"{behaviour}: the mode name of {part} is empty (name a mode, or {DEFAULT_MODE} "
-                         "for the default mode)")
+        raise RequestError(f"{behaviour}: the mode name of {part} is empty (name a mode, or {DEFAULT_MODE} "
+                           "for the default mode)")
 
 
 def seconds(owner: str, value: float | str | None, what: str = "timeout") -> float | None:
@@ -181,15 +184,16 @@ class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False)
         return self._manager
 
     def check_model(self, model: Model) -> None:
-        """Check the configuration against ``model`` (parts, modes); ``ValueError`` if it is wrong.
-        Needs no manager: ``sm-bt check`` runs it on tree files."""
+        """Check the configuration against ``model`` (parts, modes); :class:`~sm_bt.RequestError` (a
+        ``ValueError``) if it is wrong, as the manager would raise for the request. Needs no
+        manager: ``sm-bt check`` runs it on tree files."""
 
     # -- shared checks -------------------------------------------------------------------------
 
     def _check_part(self, model: Model, part: str) -> None:
         if part not in model.parts:
-            raise ValueError(f"{self.qualified_name}: unknown part {part!r} "
-                             f"(parts: {', '.join(model.parts)})")
+            raise RequestError(f"{self.qualified_name}: unknown part {part!r}{did_you_mean(part, model.parts)} "
+                               f"(parts: {', '.join(model.parts)})")
 
     def _check_mode(self, model: Model, part: str, mode: str) -> str:
         """The mode name ``mode`` stands for (``__DEFAULT__`` is the part's default mode)."""
@@ -200,5 +204,5 @@ class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False)
             return mode
         if mode == DEFAULT_MODE:
             return spec.default_mode
-        raise ValueError(f"{self.qualified_name}: {part} has no mode {mode!r} "
-                         f"(modes: {', '.join(sorted(spec.modes))})")
+        raise RequestError(f"{self.qualified_name}: {part} has no mode {mode!r}{did_you_mean(mode, spec.modes)} "
+                           f"(modes: {', '.join(sorted(spec.modes))})")

@@ -12,7 +12,7 @@ from sm_bt.engine.inference import Actual
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Origin, Request
-from sm_bt.model.errors import ModelError
+from sm_bt.model.errors import Error, ModelError, RequestError
 from sm_bt.model.loader import load_model
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model
@@ -24,6 +24,7 @@ __all__ = [
     "Actual",
     "Cause",
     "Divergence",
+    "Error",
     "Event",
     "EventKind",
     "ModeManager",
@@ -31,6 +32,7 @@ __all__ = [
     "ModelError",
     "Origin",
     "Request",
+    "RequestError",
     "State",
     "StateMode",
     "Subscription",

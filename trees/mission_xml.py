@@ -50,6 +50,7 @@ from py_trees.ports_utils import NOOP_LOGGER, collect_type_hints, convert_str_to
 from sm_bt.behaviours.idioms import _Subtree
 from sm_bt.behaviours.manager_access import ManagerBehaviour, attach_manager
 from sm_bt.engine.manager import ModeManager
+from sm_bt.model.errors import Error
 from sm_bt.model.types import Model
 
 _REFERENCE = re.compile(r"\{[^{}]+\}")
@@ -112,7 +113,7 @@ class TreeIssue:
         return f"{where}: error: {self.message}"
 
 
-class TreeFileError(Exception):
+class TreeFileError(Error):
     """A tree file could not be loaded; ``issues`` holds every mistake found, one per line of
     ``str(error)`` as ``file:line: error: message``."""
 

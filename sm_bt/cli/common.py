@@ -11,14 +11,14 @@ from pathlib import Path
 from typing import TextIO
 
 from sm_bt import bundled
-from sm_bt.model.errors import ModelError
+from sm_bt.model.errors import Error, ModelError
 from sm_bt.model.loader import load_model
 from sm_bt.model.types import Model, ModelIssue
 
 PROG = "sm-bt"
 
 
-class CliError(Exception):
+class CliError(Error):
     """A failure to report as ``sm-bt: error: MESSAGE`` with exit code 1 (no traceback)."""
 
 

@@ -23,6 +23,7 @@ from typing import Any
 
 from sm_bt.cli.arguments import non_negative, positive_int
 from sm_bt.cli.common import CliError, load_or_report
+from sm_bt.model.errors import Error
 from sm_bt.model.types import Model, SystemPart
 from sm_bt.ros.console_log import LOG_LEVELS, configure_logging
 
@@ -30,7 +31,7 @@ from sm_bt.ros.console_log import LOG_LEVELS, configure_logging
 log = logging.getLogger("sm_bt.ros.manager_node")
 
 
-class RosMissing(Exception):
+class RosMissing(Error):
     """The ROS 2 extra is not installed (the message says how to install it)."""
 
 

@@ -11,6 +11,7 @@ import enum
 from collections import deque
 from dataclasses import dataclass
 
+from sm_bt.model.errors import Error
 from sm_bt.model.states import PRIMARY_STATES, State
 
 
@@ -140,7 +141,7 @@ OUTCOMES: dict[State, dict[Outcome, tuple[Transition, State]]] = {
 }
 
 
-class PlanError(ValueError):
+class PlanError(Error, ValueError):
     """No sequence of transitions leads from one state to the other."""
 
 

@@ -43,6 +43,7 @@ from sm_bt.engine.hierarchy import Hierarchy, child_targets, implied_targets
 from sm_bt.engine.inference import Actual, Changes, Inference, NodeObservation
 from sm_bt.engine.lifecycle import (
     REQUESTABLE,
+    REQUESTABLE_LABELS,
     PlanError,
     Transition,
     first_transition,
@@ -51,6 +52,8 @@ from sm_bt.engine.lifecycle import (
 )
 from sm_bt.engine.reactions import FireRule, GiveUp, Reactions, Restore
 from sm_bt.engine.requests import Origin, Request
+from sm_bt.model.diagnostics import did_you_mean
+from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue, SystemPart
 
@@ -206,11 +209,13 @@ class ModeManager:
 
     def divergence(self, part: str) -> Divergence | None:
         with self._lock:
+            self._check_part(part)
             return self._divergences.records.get(part)
 
     def available_modes(self, part: str) -> list[str]:
         """Every mode of ``part``, sorted byte-wise (as the reference's ``get_available_modes``)."""
-        return sorted(self.model.part(part).modes)
+        self._check_part(part)
+        return sorted(self.model.parts[part].modes)
 
     def reachable_modes(self, part: str) -> list[str]:
         """The modes of ``part`` that can still be reached with the nodes unavailable now
@@ -233,23 +238,25 @@ class ModeManager:
     def observation(self, node: str) -> NodeObservation:
         """What the backend reported about ``node`` (state, parameters)."""
         with self._lock:
+            self._check_node(node)
             return self._inference.observation(node)
 
     def last_return(self, node: str) -> Return | None:
         """How ``node`` came back the last time it had vanished (``None``: it never did)."""
         with self._lock:
+            self._check_node(node)
             return self._returns.get(node)
 
     # -- commands ---------------------------------------------------------------------------------
 
     def change_mode(self, part: str, mode: str, *, timeout: float | None = None, requester: str = "user") -> Request:
         """Ask for ``part`` (system or node) to be active in ``mode`` (``__DEFAULT__`` names its
-        default mode). Returns at once. ``ValueError`` for an empty mode name. ``requester`` says
-        who asks, for logs and narratives (:attr:`Request.requester`: sm_bt's behaviours say
-        ``"tree"``)."""
+        default mode). Returns at once. :class:`RequestError` for a part or mode the model does not
+        have, or an empty mode name. ``requester`` says who asks, for logs and narratives
+        (:attr:`Request.requester`: sm_bt's behaviours say ``"tree"``)."""
         if not mode:
-            raise ValueError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
-                             "for the default mode)")
+            raise RequestError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
+                               "for the default mode)")
         with self._entry():
             return self._request(part, StateMode(State.ACTIVE, mode), f"change_mode {part} {mode}", timeout,
                                  requester)
@@ -261,21 +268,27 @@ class ModeManager:
         a state the transition is valid from (as a lifecycle node requires), or already in its
         goal state (then it succeeds at once); while a request is moving the part, any requestable
         transition is accepted and its goal state becomes the new target. Activation keeps the
-        last mode asked for."""
+        last mode asked for. :class:`RequestError` for a part the model does not have, or a
+        transition that does not exist or cannot be requested; one not valid from where the part
+        is now is a refused request."""
         with self._entry():
             name = transition.label if isinstance(transition, Transition) else str(transition)
             description = f"change_state {part} {name}"
-            if part not in self.model.parts:
-                return self._refuse(part, description, self._unknown_part(part), requester)
+            self._check_part(part)
             current = self._inference.actual(part).state
             try:
                 resolved = self._resolve_transition(transition, current)
-                if resolved not in _GOAL:
-                    raise PlanError(f"{resolved.label} ({int(resolved)}) cannot be requested")
-                goal = _GOAL[resolved]
+            except ValueError as error:
+                raise RequestError(f"{description}: {error} (transitions: {', '.join(REQUESTABLE_LABELS)})"
+                                   f"{did_you_mean(name, REQUESTABLE_LABELS)}") from None
+            if resolved not in _GOAL:
+                raise RequestError(f"{description}: {resolved.label} ({int(resolved)}) cannot be requested "
+                                   f"(transitions: {', '.join(REQUESTABLE_LABELS)})")
+            goal = _GOAL[resolved]
+            try:
                 if current.is_primary and goal is not current and not self._moving(part):
                     step_for(current, resolved)  # raises with the valid ones when invalid here
-            except (PlanError, ValueError) as error:
+            except PlanError as error:
                 return self._refuse(part, description, f"{part}: {error}", requester)
             mode = self._mode_for_activation(part) if goal is State.ACTIVE else None
             return self._start(part, StateMode(goal, mode), description, Origin.USER, timeout, resolved,
@@ -285,16 +298,18 @@ class ModeManager:
                   requester: str = "user") -> Request:
         """Ask for ``part`` to reach ``target`` (``"active.FAST"``, ``"inactive"``, a
         :class:`StateMode`), whatever it is in now: the plan takes every lifecycle step needed.
-        Used to put a part back where it was (for instance after holding a mode). Returns at once."""
+        Used to put a part back where it was (for instance after holding a mode). Returns at once.
+        :class:`RequestError` for a part or mode the model does not have, or a target that is not
+        one to ask for."""
         with self._entry():
             try:
                 wanted = target if isinstance(target, StateMode) else StateMode.parse(target)
             except ValueError as error:
-                return self._refuse(part, f"change_to {part} {target}", str(error), requester)
+                raise RequestError(f"change_to {part} {target}: {error}") from None
             description = f"change_to {part} {wanted}"
             if wanted.state not in (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE):
-                return self._refuse(part, description, f"{wanted.state.label} is not a state to ask for "
-                                    "(unconfigured, inactive or active)", requester)
+                raise RequestError(f"{description}: {wanted.state.label} is not a state to ask for "
+                                   "(unconfigured, inactive or active)")
             return self._request(part, wanted, description, timeout, requester)
 
     def subscribe(self, callback: Observer, part: str | Iterable[str] | None = None,
@@ -412,15 +427,14 @@ class ModeManager:
     def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None,
                  requester: str) -> Request:
         """Start a user request for ``wanted`` (an active mode resolved: ``__DEFAULT__`` is the
-        default mode), or refuse it with the part's real names."""
-        if part not in self.model.parts:
-            return self._refuse(part, description, self._unknown_part(part), requester)
+        default mode); :class:`RequestError` with the part's real names for one it does not have."""
+        self._check_part(part)
         if wanted.state is State.ACTIVE:
             resolved = self._resolve_mode(part, wanted.mode or DEFAULT_MODE)
             if resolved is None:
-                modes = ", ".join(self.available_modes(part))
-                return self._refuse(part, description, f"unknown mode {wanted.mode!r} of {part} (modes: {modes})",
-                                    requester)
+                modes = self.available_modes(part)
+                raise RequestError(f"{description}: unknown mode {wanted.mode!r} of {part}"
+                                   f"{did_you_mean(wanted.mode or '', modes)} (modes: {', '.join(modes)})")
             wanted = StateMode(State.ACTIVE, resolved)
         return self._start(part, wanted, description, Origin.USER, timeout, requester=requester)
 
@@ -718,10 +732,13 @@ class ModeManager:
 
     def _check_part(self, part: str) -> None:
         if part not in self.model.parts:
-            raise KeyError(self._unknown_part(part))
+            raise RequestError(f"unknown part {part!r}{did_you_mean(part, self.model.parts)} "
+                               f"(parts: {', '.join(self.model.parts)})")
 
-    def _unknown_part(self, part: str) -> str:
-        return f"unknown part {part!r} (parts: {', '.join(self.model.parts)})"
+    def _check_node(self, node: str) -> None:
+        self._check_part(node)
+        if not isinstance(self.model.parts[node], NodePart):
+            raise RequestError(f"{node} is a system, not a node (nodes: {', '.join(n.name for n in self.model.nodes)})")
 
     def _resolve_mode(self, part: str, mode: str) -> str | None:
         spec = self.model.parts[part]

@@ -859,19 +859,7 @@ class RosBackend:
         with self._lock:
             peer.calls.add(call)
 
-        def expire() -> None:
-            if busy:  # a change waits for as long as its process gives signs of life (see _working)
-                with self._lock:
-                    heard = max([call.sent, *(member.last_heard for member in self._members(peer))])
-                wait = heard + timeout - self._clock.now()
-                if wait > _SLACK and not call.finished:
-                    call.timer = self._clock.call_later(wait, expire)
-                    return
-                self._finish(call, failure=f"{label} on {peer.part}: no answer, and no word from its process "
-                                           f"for {timeout:g} s")
-                return
-            self._finish(call, failure=f"{label} on {peer.part}: no answer within {timeout:g} s")
-
+        expire = functools.partial(self._expire, call, timeout)
         if late is not None and late[0] < timeout:
             after, on_late = late
 
@@ -886,6 +874,23 @@ class RosBackend:
         call.future = future
         future.add_done_callback(lambda done: self._on_answer(call, done))
         return call
+
+    def _expire(self, call: _Call, timeout: float) -> None:
+        """``call``'s timeout: a change waits for as long as its process gives signs of life (see
+        :meth:`_working`); a query fails ``timeout`` s after it was sent."""
+        if call.finished:
+            return
+        if call.busy:
+            with self._lock:
+                heard = max([call.sent, *(member.last_heard for member in self._members(call.peer))])
+            wait = heard + timeout - self._clock.now()
+            if wait > _SLACK:
+                call.timer = self._clock.call_later(wait, functools.partial(self._expire, call, timeout))
+                return
+            failure = f"{call.label} on {call.peer.part}: no answer, and no word from its process for {timeout:g} s"
+        else:
+            failure = f"{call.label} on {call.peer.part}: no answer within {timeout:g} s"
+        self._finish(call, failure=failure)
 
     def _on_answer(self, call: _Call, future: Any) -> None:
         # A cancelled one calls back in the thread that cancelled it (maybe inside the manager):

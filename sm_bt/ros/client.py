@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
+from sm_bt.model.errors import Error
 from sm_bt.ros.environment import prepare, require_ros
 
 #: The state a lifecycle transition (by label) ends in when it succeeds.
@@ -44,15 +45,15 @@ NODE_SERVICES = frozenset({"get_state", "change_state"})
 PEEK = 2.0
 
 
-class ManagerUnreachable(RuntimeError):
+class ManagerUnreachable(Error, RuntimeError):
     """No manager (or node) answers: the message says which service and what to check."""
 
 
-class UnknownName(ValueError):
+class UnknownName(Error, ValueError):
     """A part, mode or transition that is not served: the message has the closest served names."""
 
 
-class NotConfirmed(RuntimeError):
+class NotConfirmed(Error, RuntimeError):
     """A change was accepted but not confirmed in time, or the manager says it failed: the message
     says why and where the part is."""
 

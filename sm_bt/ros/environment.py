@@ -11,12 +11,14 @@ from __future__ import annotations
 import os
 import tempfile
 
+from sm_bt.model.errors import Error
+
 #: What to install when rclpy or the interface package is missing.
 INSTALL_HINT = ("install the ROS 2 extra: `pip install -c constraints.txt -e '.[ros]'` then "
                 "`tools/ensure_interfaces.sh`, or simply `make test` / `make demo` from the repository")
 
 
-class RosUnavailable(RuntimeError):
+class RosUnavailable(Error, RuntimeError):
     """rclpy or system_modes_msgs cannot be imported in this environment, or the ROS 2 settings in
     it are not valid (see :func:`check_settings`)."""
 

@@ -42,7 +42,7 @@ from py_trees.common import Status
 
 from sm_bt.behaviours.manager_access import attach_manager
 from sm_bt.engine.events import Event, EventKind
-from sm_bt.model.errors import ModelError
+from sm_bt.model.errors import Error, ModelError
 from sm_bt.model.types import Model, SystemPart
 from sm_bt.ros.snapshot_streams import SnapshotStreams
 
@@ -51,7 +51,7 @@ log = logging.getLogger("sm_bt.ros.host")
 NODE_NAME = "sm_bt_mission"
 
 
-class HostError(RuntimeError):
+class HostError(Error, RuntimeError):
     """The host cannot start: a parameter, the model or the tree is wrong (the message says how)."""
 
 

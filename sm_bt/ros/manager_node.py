@@ -61,6 +61,7 @@ from sm_bt.engine.inference import Actual
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
+from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, SystemPart
 from sm_bt.ros import removable
@@ -156,7 +157,12 @@ class ModeManagerServer:
                         "default mode)", part, DEFAULT_MODE)
             response.success = False
             return response
-        handle = self._manager.change_mode(part, mode)
+        try:
+            handle = self._manager.change_mode(part, mode)
+        except RequestError as error:  # a name the model does not have: nothing is touched
+            log.warning("change_mode of %s to %r refused: %s", part, mode, error)
+            response.success = False
+            return response
         self._told(part, handle)
         # false exactly when nothing was changed: an accepted request that fails later is told by
         # the events and /diagnostics, and its targets stand
@@ -168,7 +174,12 @@ class ModeManagerServer:
     def _change_state(self, part: str, request: Any, response: Any) -> Any:
         transition: str | int = request.transition.label or int(request.transition.id)
         log.debug("-> callback change_state of %s: %s", part, transition)
-        handle = self._manager.change_state(part, transition)
+        try:
+            handle = self._manager.change_state(part, transition)
+        except RequestError as error:
+            log.warning("change_state of %s (%s) refused: %s", part, transition, error)
+            response.success = False
+            return response
         self._told(part, handle)
         response.success = not handle.refused
         if not response.success:  # the manager has logged why (WARNING)

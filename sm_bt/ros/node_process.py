@@ -19,12 +19,14 @@ import threading
 import time
 from typing import IO
 
+from sm_bt.model.errors import Error
+
 READY_TIMEOUT = 20.0  # the child starts rclpy and its nodes: a few seconds on a loaded machine
 STOP_GRACE = 3.0  # SIGINT, then SIGKILL after this long
 KEPT_LINES = 400  # of each output stream, for error messages and tests
 
 
-class NodesError(RuntimeError):
+class NodesError(Error, RuntimeError):
     """The node process did not start or stopped (the message says how, with its stderr)."""
 
 

@@ -176,7 +176,7 @@ class RosRuntime:
         seconds names the ones it does not reach and why. For start-up, not for a tick."""
         names = list(nodes) if nodes is not None else [node.name for node in self.model.nodes]
         for name in names:
-            self.model.part(name)  # KeyError for a name the model does not have
+            self.manager.observation(name)  # RequestError for a name the model does not have as a node
         deadline = time.monotonic() + timeout
         while True:
             missing = [name for name in names if not self.manager.observation(name).reachable]

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from sm_bt.engine.clock import Clock
 from sm_bt.engine.lifecycle import OUTCOMES, REQUESTABLE, Outcome, PlanError, Transition, step_for
+from sm_bt.model.errors import Error
 from sm_bt.model.states import State
 from sm_bt.model.types import ParamValue
 
@@ -23,11 +24,11 @@ _SCALAR_TYPES: dict[type, str] = {bool: "bool", int: "integer", float: "double",
 EMPTY_ARRAY = "array"
 
 
-class TransitionRefused(ValueError):
+class TransitionRefused(Error, ValueError):
     """The node refused a transition request (not valid in its state, or a transition is running)."""
 
 
-class ParameterRejected(ValueError):
+class ParameterRejected(Error, ValueError):
     """The node rejected a parameter set; nothing of it was applied."""
 
 

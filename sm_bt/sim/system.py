@@ -35,6 +35,7 @@ from sm_bt.engine.events import Event, EventKind
 from sm_bt.engine.lifecycle import Outcome, Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
+from sm_bt.model.errors import Error
 from sm_bt.model.loader import load_model
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.sim.backend import SimBackend, StartState
@@ -44,7 +45,7 @@ BACKEND_OPTIONS = frozenset(name for name, parameter in inspect.signature(SimBac
                             if parameter.kind is inspect.Parameter.KEYWORD_ONLY)
 
 
-class NotReached(AssertionError):
+class NotReached(Error, AssertionError):
     """A condition did not hold within the virtual time it was given (an ``AssertionError``, so that
     pytest shows it as a failed check)."""
 

@@ -21,6 +21,8 @@ import zipfile
 import zlib
 from pathlib import Path
 
+from sm_bt.model.errors import Error
+
 #: The wheel the assets come from (pinned; BSD-3).
 WHEEL = "py-trees-js==0.7.0"
 #: Where the viewer serves them from.
@@ -50,7 +52,7 @@ _NODE = 22  # bytes per tree node in format 2
 _COMPRESSED, _DIRECTORY = 0x01, 0x02
 
 
-class AssetsError(RuntimeError):
+class AssetsError(Error, RuntimeError):
     """The assets could not be fetched or decoded (the message says what to do)."""
 
 

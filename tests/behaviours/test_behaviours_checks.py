@@ -239,7 +239,8 @@ def test_an_unknown_part_fails_at_setup_with_the_real_names(rig: SimulatedSystem
     tree = py_trees.trees.BehaviourTree(behaviour)
     with pytest.raises(ValueError) as raised:
         tree.setup(manager=rig.manager)
-    assert str(raised.value) == f"{behaviour.qualified_name}: unknown part 'pilto' (parts: {PILOT_PARTS})"
+    assert str(raised.value) == (f"{behaviour.qualified_name}: unknown part 'pilto' (did you mean 'pilot'?) "
+                                 f"(parts: {PILOT_PARTS})")
 
 
 WITH_MODE = ["ChangeMode", "ModeIs", "WaitForMode", "HoldMode"]
@@ -252,7 +253,8 @@ def test_an_unknown_mode_fails_at_setup_with_the_real_modes(rig: SimulatedSystem
     with pytest.raises(ValueError) as raised:
         tree.setup(manager=rig.manager)
     assert str(raised.value) == (
-        f"{behaviour.qualified_name}: pilot has no mode 'f_turbo_mode' (modes: __DEFAULT__, f_degraded_mode, "
+        f"{behaviour.qualified_name}: pilot has no mode 'f_turbo_mode' (did you mean 'f_slow_mode'?) "
+        "(modes: __DEFAULT__, f_degraded_mode, "
         "f_energy_saving_mode, f_normal_mode, f_performance_mode, f_slow_mode)")
 
 

@@ -101,5 +101,6 @@ def test_an_unknown_mode_found_late_is_the_usual_error_at_the_first_tick(rig: Si
     tree = py_trees.trees.BehaviourTree(root)
     tree.setup()
     tree.insert_subtree(ModeIs("Typo?", "pilot", "f_nromal_mode"), root.id, 0)
-    with pytest.raises(ValueError, match=r"pilot has no mode 'f_nromal_mode' \(modes: .*f_normal_mode"):
+    with pytest.raises(ValueError, match=r"pilot has no mode 'f_nromal_mode' \(did you mean 'f_normal_mode'\?\) "
+                                         r"\(modes: .*f_normal_mode"):
         tree.tick()

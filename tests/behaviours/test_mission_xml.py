@@ -54,9 +54,10 @@ MISTAKES = {
                           "<ModeIs> has no attribute 'mdoe' (did you mean 'mode'?)"),
     "missing attribute": ('<ChangeMode part="pilot"/>', "<ChangeMode> needs mode"),
     "unknown part": ('<ChangeMode name="Go" part="pilto" mode="f_normal_mode"/>',
-                     "<ChangeMode 'Go'>: unknown part 'pilto' (parts: pilot,"),
+                     "<ChangeMode 'Go'>: unknown part 'pilto' (did you mean 'pilot'?) (parts: pilot,"),
     "unknown mode": ('<WaitForMode name="W" part="pilot" mode="f_nromal_mode"/>',
-                     "<WaitForMode 'W'>: pilot has no mode 'f_nromal_mode' (modes: __DEFAULT__,"),
+                     ("<WaitForMode 'W'>: pilot has no mode 'f_nromal_mode' (did you mean 'f_normal_mode'?) "
+                      "(modes: __DEFAULT__,")),
     "unknown transition": ('<ChangeState name="C" part="pilot" transition="confgure"/>',
                            "<ChangeState 'C'>: cannot request transition 'confgure' (one of: configure,"),
     "bad timeout": ('<ChangeMode name="Go" part="pilot" mode="f_normal_mode" timeout="ten"/>',

@@ -5,8 +5,10 @@ from __future__ import annotations
 import pytest
 from model_files import bundled, fixture
 
+import sm_bt
 from sm_bt.engine.events import EventKind
 from sm_bt.engine.lifecycle import Outcome, Transition
+from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
 from sm_bt.sim import SimulatedSystem
 
@@ -55,12 +57,52 @@ def test_same_mode_name_in_another_state_is_not_redundant(rig: SimulatedSystem) 
     assert again.succeeded and str(rig.manager.actual("actuation")) == "active.MODERATE"
 
 
-def test_unknown_part_or_mode_fails_at_once(rig: SimulatedSystem) -> None:
-    request = rig.manager.change_mode("actuation", "TURBO")
-    assert request.done and not request.succeeded
-    assert "unknown mode 'TURBO'" in request.reason and "PERFORMANCE" in request.reason
-    request = rig.manager.change_mode("acutation", "PERFORMANCE")
-    assert request.done and "unknown part" in request.reason
+def test_a_name_the_model_does_not_have_raises_with_the_closest_one_and_changes_nothing(rig: SimulatedSystem) -> None:
+    """One rule for the Python API: a mistake the model alone shows raises RequestError (a
+    ValueError, and an sm_bt.Error) at once, naming what the model has, closest first."""
+    manager = rig.manager
+    cases = [
+        (lambda: manager.change_mode("actuation", "PERFORMANSE"),
+         "change_mode actuation PERFORMANSE: unknown mode 'PERFORMANSE' of actuation (did you mean 'PERFORMANCE'?) "
+         "(modes: MODERATE, PERFORMANCE, __DEFAULT__)"),
+        (lambda: manager.change_mode("acutation", "PERFORMANCE"),
+         "unknown part 'acutation' (did you mean 'actuation'?) (parts: actuation, manipulator, drive_base)"),
+        (lambda: manager.change_mode("actuation", ""), "change_mode of actuation: the mode name is empty"),
+        (lambda: manager.change_state("actuation", "configur"),
+         "change_state actuation configur: 'configur' is not a lifecycle transition label (transitions: configure, "
+         "activate, deactivate, cleanup, shutdown) (did you mean 'configure'?)"),
+        (lambda: manager.change_state("actuation", 99), "change_state actuation 99: 99 is not a valid Transition"),
+        (lambda: manager.change_state("actuation", Transition.ON_CONFIGURE_SUCCESS),
+         "(10) cannot be requested (transitions: configure, activate, deactivate, cleanup, shutdown)"),
+        (lambda: manager.change_to("actuation", "finalized"),
+         "change_to actuation finalized: finalized is not a state to ask for"),
+        (lambda: manager.change_to("actuation", "active.TURBO"), "unknown mode 'TURBO' of actuation"),
+        (lambda: manager.change_to("actuation", "Active"), "change_to actuation Active: "),
+        (lambda: manager.actual("ghost"), "unknown part 'ghost'"),
+        (lambda: manager.target("ghost"), "unknown part 'ghost'"),
+        (lambda: manager.divergence("ghost"), "unknown part 'ghost'"),
+        (lambda: manager.available_modes("ghost"), "unknown part 'ghost'"),
+        (lambda: manager.observation("actuation"),
+         "actuation is a system, not a node (nodes: manipulator, drive_base)"),
+    ]
+    for call, says in cases:
+        with pytest.raises(RequestError) as raised:
+            call()
+        assert str(raised.value).startswith(says) or says in str(raised.value), str(raised.value)
+        assert isinstance(raised.value, ValueError) and isinstance(raised.value, sm_bt.Error)
+    assert manager.requests() == [] and manager.target("actuation") is None
+    assert not [e for e in rig.backend.events if e.kind == "request"], "no node was touched"
+
+
+def test_what_depends_on_the_running_system_is_a_refused_request_with_the_reason(rig: SimulatedSystem) -> None:
+    """The other half of the rule: valid names the system cannot take now are refused requests."""
+    refused = rig.manager.change_state("actuation", "activate")  # unconfigured: activate is not valid yet
+    assert refused.refused and refused.done and not refused.succeeded
+    assert refused.reason == ("actuation: transition activate is not valid in state unconfigured "
+                              "(valid: configure, shutdown)")
+    rig.close()
+    closed = rig.manager.change_mode("actuation", "PERFORMANCE")
+    assert closed.refused and closed.reason == "the manager is closed"
 
 
 def test_refused_transition_fails_with_the_reason(rig: SimulatedSystem) -> None:

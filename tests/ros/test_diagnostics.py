@@ -59,10 +59,10 @@ def test_a_failed_request_is_an_error_until_the_part_is_at_its_target() -> None:
 
 def test_a_refused_request_warns_and_says_why() -> None:
     rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
-    refused = rig.manager.change_mode("pilot", "no_such_mode")
+    refused = rig.manager.change_state("pilot", "activate")  # unconfigured: not valid yet
     pilot = status(rig, "pilot", refused)
     assert pilot.level == WARN and pilot.value("last_request_outcome") == "refused"
-    assert "unknown mode 'no_such_mode'" in pilot.message
+    assert "transition activate is not valid in state unconfigured" in pilot.message
 
 
 def test_an_unreachable_node_is_an_error_with_the_reason_and_an_unseen_one_is_stale() -> None:

@@ -15,6 +15,7 @@ from ros_processes import RosContext, Starter, wait_until
 from system_modes_msgs.srv import GetMode
 
 from sm_bt.behaviours import ChangeMode, attach_manager
+from sm_bt.model.errors import RequestError
 from sm_bt.ros.runtime import RosRuntime
 
 pytestmark = pytest.mark.ros
@@ -111,7 +112,7 @@ def test_waiting_for_nodes_that_are_not_there_names_them() -> None:
     try:
         with pytest.raises(TimeoutError, match=r"not reachable after 0.5 s: amcl \(not found on the ROS graph\)"):
             runtime.wait_for_nodes(0.5, ["amcl"])
-        with pytest.raises(KeyError):
+        with pytest.raises(RequestError, match=r"unknown part 'amlc' \(did you mean 'amcl'\?\)"):
             runtime.wait_for_nodes(0.1, ["amlc"])
     finally:
         runtime.close()

@@ -12,8 +12,8 @@ The invariants (each failure raises its own :class:`InvariantViolation` subclass
 holds the scenario as Python, ready to paste into ``test_manager_regressions.py``):
 
 * **I1** every request returned by the manager (user, tree, rule, recovery) is done by the end, at
-  the latest at its creation time + its timeout; every failed one has a reason; one refused for
-  an invalid part, mode, transition or target is done at once.
+  the latest at its creation time + its timeout; every failed one has a reason; a call that names a
+  part, mode, transition or target the model does not have raises RequestError (and only such a one).
 * **I2** a request that failed "preempted by request #k" was superseded by a later (k > id),
   accepted request k.
 * **I3** last request wins: the final user request ends SUCCESS with the part's actual equal to its
@@ -68,6 +68,7 @@ from sm_bt.engine.inference import infer_all
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Outcome, transition_by_label
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Origin, Request
+from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue
 from sm_bt.sim import NodeStatus, SimBackend, SimulatedSystem
@@ -387,7 +388,6 @@ class _Seen:
     timeout: float
     refused_at_once: bool = False  # done (and failed) when the call returned
     announced: bool = False  # the manager told its observers it started: it was accepted
-    expect_refusal: bool = False  # invalid by name: must be refused at once
     finished_actual: StateMode | None = None  # the part's actual when it finished
     registered_running: bool = True  # its done-callback was added before it ended (I10)
 
@@ -638,17 +638,28 @@ class _Runner:
                 backend.trigger(action.node, valid[action.choice % len(valid)], Outcome(action.outcome),
                                 Outcome(action.on_error))
 
-    def request(self, action: RequestAction, timeout: float | None = None) -> Request:
+    def request(self, action: RequestAction, timeout: float | None = None) -> Request | None:
+        """Make the request; ``None`` when the manager raised (a name the model does not have: I1)."""
         manager = self.manager
         timeout = action.timeout if timeout is None else timeout
         targets = {part: manager.target(part) for part in self.model.parts}
         running = {r.id for r in manager.requests()}
-        if isinstance(action, ChangeMode):
-            request = manager.change_mode(action.part, action.mode, timeout=timeout)
-        elif isinstance(action, ChangeState):
-            request = manager.change_state(action.part, action.transition, timeout=timeout)
-        else:
-            request = manager.change_to(action.part, action.target, timeout=timeout)
+        invalid = invalid_by_name(self.model, action)
+        try:
+            if isinstance(action, ChangeMode):
+                request = manager.change_mode(action.part, action.mode, timeout=timeout)
+            elif isinstance(action, ChangeState):
+                request = manager.change_state(action.part, action.transition, timeout=timeout)
+            else:
+                request = manager.change_to(action.part, action.target, timeout=timeout)
+        except RequestError as error:
+            if not invalid:
+                self._violate(I1RequestEnds, f"{action} raised although the model has every name it uses: {error}")
+            return None
+        if invalid:
+            self._violate(I1RequestEnds, f"request #{request.id} {request.description} names a part, mode, "
+                                         f"transition or target the model does not have, but did not raise "
+                                         f"({request.reason or request.feedback})")
         seen = self.seen.get(request.id)
         if seen is None:
             seen = self.seen[request.id] = _Seen(request, 0.0)
@@ -662,7 +673,6 @@ class _Runner:
                 self._violate(I9RefusalChangesNothing, f"request #{request.id} {request.description} was refused "
                                                        f"({request.reason}) but changed the targets of {changed} "
                                                        f"and started {sorted(started)}")
-        seen.expect_refusal = invalid_by_name(self.model, action)
         self.user.append(request)
         return request
 
@@ -717,6 +727,7 @@ class _Runner:
         stale = {node for node in needed if self.backend.status(node) is NodeStatus.RUNNING
                  and self.manager.observation(node).state is not self.backend.node(node).state}
         request = self.request(final, FINAL_TIMEOUT)
+        assert request is not None, f"the final request {final} is not a valid one"
         self.advance(self.clock.now() + FINAL_TIMEOUT + 1.0, stop=lambda: request.done)
         missing = [node for node, wanted in needed.items()
                    if (self.backend.is_plain(node) and wanted.state is not State.ACTIVE)
@@ -807,9 +818,6 @@ class _Runner:
                                              f"({seen.timeout:g} s from t={request.created:.3f})")
             if not request.succeeded and not request.reason:
                 self._violate(I1RequestEnds, f"{name} failed without a reason")
-            if seen.expect_refusal and not seen.refused_at_once:
-                self._violate(I1RequestEnds, f"{name} names an unknown part, mode, transition or target, but was "
-                                             f"not refused at once ({request.reason or 'succeeded'})")
             match = PREEMPTED.search(request.reason)
             if match:
                 by = int(match.group(1))
@@ -882,7 +890,7 @@ def give_up_bound(options: ManagerOptions) -> float:
 
 def invalid_by_name(model: Model, action: RequestAction) -> bool:
     """True when the request names a part, mode, transition or target the model (or the lifecycle)
-    does not have: the manager must refuse it at once, whatever the state."""
+    does not have: the manager must raise RequestError, whatever the state."""
     spec = model.parts.get(action.part)
     if spec is None:
         return True
