@@ -716,3 +716,32 @@ def test_a_request_confirmed_from_what_the_manager_knows_before_late_news_is_a_s
         final=ChangeTo(part="amcl", target="active.__DEFAULT__"),
         final_delay=0.01,
     ))
+
+
+def test_a_continuation_succeeds_only_once_the_nodes_it_carries_on_with_are_at_their_targets() -> None:
+    """Issue 27, item 4: a continuation of a preempted request was reported succeeded as soon as its
+    plan was done, while amcl (one of its nodes, crashed and back) was still configuring, off its
+    target (I10). Its success now waits for its nodes' actuals (found by the stress profile on the
+    old rule)."""
+    check(Scenario(
+        model="pilot",
+        manager=ManagerOptions(grace_period=0.1, request_timeout=3.0, recovery_attempts=2, recovery_window=5.0,
+                               rules=False, recovery=False),
+        sim=SimOptions(error_delay=0.2, parameter_delay=0.0,
+                       initial_state=(("amcl", "active"), ("controller_server", "active")),
+                       late=(("amcl", 8.5), ("pointcloud_to_laser", 4.8))),
+        steps=(
+            Step(0.02, Trigger(node="amcl", choice=1, outcome="failure")),
+            Step(0.03, Trigger(node="amcl", outcome="failure")),
+            Step(0.13, Restart(node="laser_resender", state="inactive")),
+            Step(35.13, Crash(node="laser_resender")),
+            Step(35.13, Crash(node="amcl")),
+            Step(35.14, ChangeMode(part="pilot", mode="f_performance_mode")),
+            Step(35.14, ChangeState(part="pilot", transition="activate")),
+            Step(35.14, ChangeMode(part="controller_server", mode="__DEFAULT__")),
+            Step(35.15, HangNext(node="amcl", transition="activate")),
+            Step(35.15, ChangeMode(part="laser_resender", mode="__DEFAULT__")),
+        ),
+        final=ChangeMode(part="laser_resender", mode="__DEFAULT__"),
+        final_delay=0.01,
+    ))

@@ -199,6 +199,29 @@ def test_killing_a_node_mid_change_fails_the_request_marks_it_unknown_and_recove
         rig.close()
 
 
+def test_a_node_shut_down_and_restarted_rejoins_its_system_over_ros(node_processes: Starter) -> None:
+    """Issue 27, item 3, on ROS: controller_server shut down (finalized), its process restarted.
+    Before, the manager shut the new process down again and refused every later request of the
+    pilot ("controller_server is finalized (it must be restarted)")."""
+    others = node_processes("pilot", "--only", "amcl,pointcloud_to_laser,laser_resender")
+    controller = node_processes("pilot", "--only", "controller_server")
+    rig = harness(others, recovery=True, grace_period=0.5)
+    try:
+        settle(rig, rig.manager.change_mode("pilot", "f_normal_mode"))
+        settle(rig, rig.manager.change_state("controller_server", "shutdown"))
+        assert rig.manager.actual("controller_server").state is State.FINALIZED
+        refused = rig.manager.change_mode("pilot", "f_degraded_mode")
+        assert refused.refused and "controller_server is finalized (it must be restarted)" in refused.reason
+        controller.stop()
+        controller.start()  # a new process, unconfigured
+        rig.run_until(lambda: str(rig.manager.actual("controller_server")) == "active.__DEFAULT__", 15.0)
+        assert rig.manager.target("controller_server") == StateMode(State.ACTIVE, "__DEFAULT__")
+        settle(rig, rig.manager.change_mode("pilot", "f_degraded_mode"), 15.0)
+        assert str(rig.manager.actual("pilot")) == "active.f_degraded_mode"
+    finally:
+        rig.close()
+
+
 def test_a_node_that_stops_cleanly_is_reported_gone_at_once(node_processes: Starter) -> None:
     others = node_processes("pilot", "--only", "amcl,controller_server,pointcloud_to_laser")
     laser = node_processes("pilot", "--only", "laser_resender")
