@@ -65,3 +65,13 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
             return module if module in ONE_WORKER else nodeid
 
     return OneByOne(config, log)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "long: takes ten seconds or more (waits on other processes): started first")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The long tests first, so that under pytest-xdist they start while the short ones fill the
+    other workers, instead of one of them starting last and holding up the end of the run."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)

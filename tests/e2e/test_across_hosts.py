@@ -140,6 +140,7 @@ def test_a_change_refused_during_a_cut_changes_nothing_after_the_heal(two_hosts:
     assert hosts.sm_bt("state", "get", "amcl")[1] == "amcl: inactive\n"
 
 
+@pytest.mark.long
 def test_a_lossy_link_is_slow_not_gone_and_changes_complete(two_hosts: Hosts) -> None:
     hosts = two_hosts
     _, manager, diagnostics = start(hosts, "--state", "inactive")
@@ -206,6 +207,7 @@ def test_nodes_restarted_behind_a_cut_come_back_said_so_and_are_restored(two_hos
     assert hosts.sm_bt("state", "get", "amcl")[1] == "amcl: active\n"
 
 
+@pytest.mark.long
 def test_partition_and_heal_cycles_keep_the_invariants(two_hosts: Hosts) -> None:
     # Two cycles here (make stress runs thirty, tests/e2e/stress_partitions.py), with a seed of their own each run.
     seed = random.SystemRandom().randrange(1 << 30)

@@ -81,6 +81,7 @@ def test_a_mode_change_from_the_brain_side_reaches_the_robot_and_its_events_come
     assert hosts.sm_bt("state", "get", "amcl") == (0, "amcl: active\n", "")
 
 
+@pytest.mark.long
 def test_a_cut_link_makes_the_nodes_unknown_and_a_healed_one_brings_them_back(two_hosts: Hosts) -> None:
     hosts = two_hosts
     hosts.nodes("pilot")

@@ -282,6 +282,7 @@ def run_transcript(block: Block) -> None:
                                            + "\n".join(actual) + "\n\nand the README shows\n" + "\n".join(expected))
 
 
+@pytest.mark.long
 @by_line(of_kind("transcript"))
 def test_transcripts_print_what_the_readme_shows(block: Block) -> None:
     run_transcript(block)

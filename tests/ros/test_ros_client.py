@@ -28,6 +28,7 @@ def sm_bt(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str
     return code, out, err
 
 
+@pytest.mark.long
 def test_mode_and_state_commands_drive_the_pilot_and_confirm_each_change(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter,
         capsys: pytest.CaptureFixture[str]) -> None:
@@ -159,6 +160,7 @@ def test_a_node_that_does_not_answer_is_told_apart_from_a_missing_manager(
     assert sm_bt(capsys, "state", "get", "controller_server")[1] == "controller_server: unconfigured\n"
 
 
+@pytest.mark.long
 def test_monitor_next_to_a_running_manager_watches_and_refuses_to_act(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter,
         capsys: pytest.CaptureFixture[str]) -> None:

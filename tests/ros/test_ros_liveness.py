@@ -183,6 +183,7 @@ def _vanished(manager: Any) -> list[str]:
     return seen
 
 
+@pytest.mark.long
 @pytest.mark.parametrize(("model", "args", "switch"), [
     # Each node a thread: the four configure at once, 3 s each (the reported failure: all four gone).
     ("pilot", ("--transition-delay", "3"), ("pilot", "f_degraded_mode")),
@@ -215,6 +216,7 @@ def test_nodes_whose_transitions_take_seconds_are_busy_not_gone(
         ros.close()
 
 
+@pytest.mark.long
 def test_a_process_killed_in_a_long_transition_is_told_and_its_change_fails(node_processes: Starter) -> None:
     """Busy excuses silence, not death: the node's services leave the ROS graph when DDS drops the
     dead process, and that is the verdict (a request that waits for it fails then, with the reason)."""

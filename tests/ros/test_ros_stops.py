@@ -22,6 +22,7 @@ STOPS = 6
 PROMPT = 2.0
 
 
+@pytest.mark.long
 def test_the_manager_stops_cleanly_with_requests_in_flight(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext) -> None:
     node_processes("pilot")
