@@ -385,7 +385,13 @@ class ModeManager:
 
     def _node_state(self, node: str, state: State) -> None:
         with self._entry():
+            # Nothing leaves finalized: a finalized node heard in another state is a new process
+            # (restarted too quickly to be seen gone in between).
+            reborn = self._inference.observation(node).state is State.FINALIZED and state is not State.FINALIZED
             self._apply(self._inference.node_state(node, state))
+            if reborn:
+                self._renew_budgets([node])
+                self._new_life(node, state)
             self._drivers[node].state_reported(state)
             self._drivers[node].advance()
 

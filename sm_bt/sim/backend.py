@@ -405,11 +405,13 @@ class SimBackend:
         self._hung.discard(node)
         self._vanish(node, "its process ended")
 
-    def restart(self, node: str, state: StartState | None = None) -> None:
+    def restart(self, node: str, state: StartState | None = None, *, unnoticed: bool = False) -> None:
         """A fresh process of ``node`` (running, crashed, vanished or not yet started) starts now in
         ``state`` (default: unconfigured; a plain node always starts active) with the initial
         parameter values; calls pending on the old one fail at once, once the new process is up
-        (so that a client calling again from their ``done`` reaches the new one)."""
+        (so that a client calling again from their ``done`` reaches the new one). ``unnoticed``: a
+        listener that saw the old process hears of the new one as a change of its state only, as
+        over ROS 2 for a process restarted faster than the graph is looked at (once a second)."""
         self._require(node)
         plain = node in self._plain
         default = State.ACTIVE if plain else State.UNCONFIGURED
@@ -418,7 +420,13 @@ class SimBackend:
             raise ValueError(f"cannot restart node {node} in {start}: it has no lifecycle services (parameters "
                              "only), so it runs active")
         stale = self._stop(node)
-        self._start(node, start, f"restarted in {start}")
+        if unnoticed and node in self._visible:
+            self._nodes[node] = self._spawn(node, start)
+            self._status[node] = NodeStatus.RUNNING
+            self._record(node, EventKind.STARTED, f"restarted in {start}, unnoticed")
+            self._report(lambda listener: listener.node_state(node, start))
+        else:
+            self._start(node, start, f"restarted in {start}")
         self._fail(stale, f"node {node} restarted")
 
     def clear_faults(self, node: str | None = None) -> None:

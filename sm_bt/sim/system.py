@@ -222,9 +222,10 @@ class SimulatedSystem:
         """``node``'s process ends (it exits, or is killed): it is reported gone at once."""
         self.backend.vanish(node)
 
-    def restart(self, node: str, state: StartState | None = None) -> None:
-        """A fresh process of ``node`` starts (unconfigured unless ``state``) with its initial parameters."""
-        self.backend.restart(node, state)
+    def restart(self, node: str, state: StartState | None = None, *, unnoticed: bool = False) -> None:
+        """A fresh process of ``node`` starts (unconfigured unless ``state``) with its initial parameters
+        (``unnoticed``: seen as a change of the old one's state, see :meth:`SimBackend.restart`)."""
+        self.backend.restart(node, state, unnoticed=unnoticed)
 
     def clear_faults(self, node: str | None = None) -> None:
         """Disarm what :meth:`fail_next`, :meth:`hang_next` and :meth:`reject_parameters` armed."""

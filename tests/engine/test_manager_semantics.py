@@ -340,6 +340,22 @@ def test_a_node_restarted_after_being_finalized_rejoins_its_system_instead_of_be
     assert str(rig.manager.actual("pilot")) == "active.f_degraded_mode"
 
 
+def test_a_node_restarted_too_quickly_to_be_seen_gone_starts_a_new_life_too() -> None:
+    """Over ROS the graph is looked at once a second: a process stopped and started again within
+    that is heard of as a state change of the old one (finalized -> unconfigured). Nothing leaves
+    finalized, so that is a new process as well (found by make test on a fresh clone: recovery
+    shut the new process down again)."""
+    rig = SimulatedSystem(bundled("pilot"), grace_period=0.5)
+    assert rig.finish(rig.manager.change_mode("pilot", "f_normal_mode")).succeeded
+    assert rig.finish(rig.manager.change_state("controller_server", "shutdown")).succeeded
+    rig.restart("controller_server", unnoticed=True)
+    rig.run(0.01)
+    assert rig.manager.target("controller_server") == StateMode(State.ACTIVE, "__DEFAULT__")
+    rig.run(5.0)
+    assert str(rig.manager.actual("controller_server")) == "active.__DEFAULT__"
+    assert rig.finish(rig.manager.change_mode("pilot", "f_degraded_mode")).succeeded
+
+
 def test_a_node_restarted_in_a_finalized_system_keeps_the_state_it_came_back_in() -> None:
     """When its system was shut down too, nothing asks anything of the new process but itself: its
     target is the state it came back in, and the system is reachable again once every node is back."""

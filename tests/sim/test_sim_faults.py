@@ -314,6 +314,19 @@ def test_restart_after_crash_is_a_fresh_process() -> None:
     assert results == [CallResult(True)]
 
 
+def test_a_restart_unnoticed_is_told_as_a_state_change_of_the_old_process() -> None:
+    backend, recorder = attached(initial_state=S.ACTIVE)
+    results: list[CallResult] = []
+    backend.set_delay("amcl", 1.0)
+    backend.change_state("amcl", T.DEACTIVATE, results.append)
+    backend.clock.advance(0.5)
+    recorder.reports.clear()
+    backend.restart("amcl", unnoticed=True)
+    assert recorder.reports == [("state", "amcl", S.UNCONFIGURED)]  # no vanish, no appearance
+    assert results == [CallResult(False, "node amcl restarted")]
+    assert backend.node("amcl").state is S.UNCONFIGURED and backend.status("amcl") is NodeStatus.RUNNING
+
+
 def test_restart_before_vanishing_cancels_the_vanish() -> None:
     backend, recorder = attached()
     backend.crash("amcl")
