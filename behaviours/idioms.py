@@ -32,7 +32,8 @@ class HoldMode(ManagerBehaviour, register=False):
       (it never succeeds by itself); FAILURE if the change fails
     * ``terminate`` (SUCCESS of the work beside it, FAILURE, or interruption): withdraw the
       change if still in flight and request the remembered target back, unless somebody else
-      asked for another target meanwhile (their request wins, nothing is restored)
+      asked for another target meanwhile (their request wins, nothing is restored) or it was
+      ``finalized`` (not a target to ask for: only a restart leaves it)
 
     Use it through :func:`hold_mode`, which runs it in a parallel next to the work.
     """
@@ -97,11 +98,18 @@ class HoldMode(ManagerBehaviour, register=False):
         previous = self._previous
         if not ours or previous is None or previous == self._held:
             return
+        if previous.state not in RESTORABLE:  # finalized: only a restart brings a node back from there
+            self.feedback_message = f"{self.part} was {previous} before: not a target to ask for, left {self._held}"
+            return
         self.restore_request = self.manager.change_to(self.part, previous, requester=REQUESTER)
         restoring = f"restoring {self.part} to {previous}"
         # On FAILURE (the change failed) keep why in the feedback, as every FAILURE does.
         self.feedback_message = f"{request.reason}; {restoring}" if new_status is Status.FAILURE else restoring
         self.restore_request.add_done_callback(_report_restore)
+
+
+#: The targets a part can be taken back to (``change_to``'s).
+RESTORABLE = (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE)
 
 
 def _report_restore(request: Request) -> None:

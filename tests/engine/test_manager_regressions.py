@@ -745,3 +745,32 @@ def test_a_continuation_succeeds_only_once_the_nodes_it_carries_on_with_are_at_t
         final=ChangeMode(part="laser_resender", mode="__DEFAULT__"),
         final_delay=0.01,
     ))
+
+
+def test_a_held_mode_whose_previous_target_was_finalized_is_not_put_back() -> None:
+    """Found by make test on a fresh clone once the manager raised for a target that is not one to
+    ask for: HoldMode on pilot, whose target was finalized (shut down at the start), asked for
+    finalized back when it ended, and the RequestError broke the tree's tick. It leaves the part
+    as it is instead. (Unshrunk, as hypothesis found it.)"""
+    check(Scenario(
+        model="pilot_rules",
+        manager=ManagerOptions(grace_period=0.5, request_timeout=20.0, recovery_attempts=1, recovery_window=10.0),
+        sim=SimOptions(transition_delay=0.05, error_delay=1.0, parameter_delay=0.0, vanish_after=3.0,
+                       late=(("pointcloud_to_laser", 6.6), ("controller_server", 3.9)), plain=("laser_resender",),
+                       slow=(("pointcloud_to_laser", 0.7), ("controller_server", 4.5))),
+        steps=(
+            Step(0.0, ChangeState(part="pilot", transition="shutdown")),
+            Step(0.0, ChangeMode(part="laser_resender", mode="TYPO")),
+            Step(16.0, ChangeMode(part="amcl", mode="TYPO", timeout=13.0)),
+            Step(51.0, ChangeMode(part="pointcloud_to_laser", mode="__DEFAULT__")),
+        ),
+        tree=(
+            (TreeItem(kind="wait_for_mode", part="controller_server", arg="__DEFAULT__", timeout=0.5, ticks=0),
+             TreeItem(kind="change_mode", part="controller_server", arg="SLOW", timeout=0.5, ticks=0),
+             TreeItem(kind="change_mode", part="controller_server", arg="__DEFAULT__", timeout=0.5, ticks=0)),
+            (TreeItem(kind="change_mode", part="controller_server", arg="DEGRADED", timeout=0.5, ticks=0),),
+            (TreeItem(kind="hold_mode", part="pilot", arg="f_energy_saving_mode", timeout=0.5, ticks=0),),
+        ),
+        final=ChangeMode(part="laser_resender", mode="__DEFAULT__"),
+        final_delay=1.0,
+    ))
