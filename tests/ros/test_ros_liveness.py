@@ -33,7 +33,9 @@ NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
 #: health check gives up (about a second, again and again), which a cut network never does; over
 #: UDP a datagram to a frozen process is simply lost, as over a cut link.
 UDP_ONLY = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
-REASON = re.compile(r"no answer from /(\w+) for (?:0\.9|1\.0) s \(node exited, or network unreachable\)")
+#: The verdict: silent for the window (0.9 s on a quiet machine; on one so loaded that the probes were
+#: answered slowly, the backend has learned a wider one, and says so).
+REASON = re.compile(r"no answer from /(\w+) for (?:0\.9|[1-9]\d*\.\d) s \(node exited, or network unreachable\)")
 
 
 def test_the_defaults_are_the_ones_these_tests_time() -> None:
