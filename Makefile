@@ -36,7 +36,7 @@ demo-ros: $(STAMP)
 
 # The suite in PYTEST_WORKERS parallel workers (pytest-xdist), with Chromium installed while the venv
 # is built, then lint; prints the wall time of each step (tools/run_tests.sh).
-PYTEST_WORKERS ?= 6
+PYTEST_WORKERS ?= 4
 test:
 	@mkdir -p $(ROS_LOG_DIR)
 	@MAKE="$(MAKE)" VENV="$(VENV)" STAMP="$(STAMP)" PYTEST_WORKERS="$(PYTEST_WORKERS)" bash tools/run_tests.sh

@@ -33,6 +33,9 @@ DISCOVERY_TIMEOUT = 10.0
 DISCOVERY_POLL = 0.02
 #: The first call after discovery takes about 0.1 s (the response path matches late).
 FIRST_CALL_TIMEOUT = 2.0
+#: Services that may be asked twice with no other effect (see :meth:`RosContext.call`).
+IDEMPOTENT = frozenset({"GetState", "GetMode", "GetAvailableModes", "GetAvailableStates", "GetAvailableTransitions",
+                        "GetParameters", "ListParameters", "SetParameters", "SetParametersAtomically"})
 SHM = Path("/dev/shm")
 
 
@@ -172,6 +175,7 @@ class RosContext:
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node: Any = rclpy.create_node(name, context=self.context)
         self._clients: dict[tuple[Any, str], Any] = {}
+        self._answered: set[Any] = set()  # clients that got an answer once
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, name="ros-test-spin", daemon=True)
@@ -191,11 +195,24 @@ class RosContext:
         return self._clients[key]
 
     def call(self, service_type: Any, name: str, request: Any, timeout: float = FIRST_CALL_TIMEOUT) -> Any:
-        """Call service ``name`` (waiting for its discovery first) and return the response."""
+        """Call service ``name`` (waiting for its discovery first) and return the response.
+
+        The first request of a fresh client can go unanswered: the server answers before the
+        path back to this client is matched (DDS discovery; seen on a loaded machine, never on a
+        quiet one), and a real client asks again. So does this one, once, for a query or a
+        parameter set (asking twice changes nothing); a transition is never asked twice."""
         client = self.client(service_type, name)
         if not client.service_is_ready():
             self.wait_for([client])
-        return call(client, request, timeout)
+        first = client not in self._answered
+        try:
+            response = call(client, request, timeout)
+        except AssertionError:
+            if not first or service_type.__name__ not in IDEMPOTENT:
+                raise
+            response = call(client, request, timeout)
+        self._answered.add(client)
+        return response
 
     def subscribe(self, message_type: Any, topic: str, depth: int = 50) -> list[Any]:
         """A list the messages on ``topic`` are appended to (by the executor thread)."""
