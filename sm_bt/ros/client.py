@@ -137,11 +137,18 @@ class ModeClient:
 
     def _what_to_check(self, part: str, service: str) -> str:
         if service in NODE_SERVICES and self._manager_answers(part):
+            if self._is_system(part):  # the manager serves this service itself: it answered another one
+                return (f"{part} is a system, and its mode manager answers get_mode but not {service} in time: "
+                        "it is busy or the network is slow; try again, or with a longer --timeout")
             # Its manager answers but its lifecycle services do not: they are a node's own.
             return (f"{part} is a node, and its mode manager answers but the node does not: it is not running, or "
                     f"the network to it is down (`sm-bt mode get {part}` shows what the manager knows)")
         return ("is a mode manager (`sm-bt manager MODEL`) running, with the same ROS_DOMAIN_ID and "
                 "ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?")
+
+    def _is_system(self, part: str) -> bool:
+        """Does a manager serve ``part`` as a system (``get_available_states`` is a system's only)?"""
+        return any(name == f"/{part}/get_available_states" for name, _ in self.node.get_service_names_and_types())
 
     def _manager_answers(self, part: str) -> bool:
         """Does a manager answer ``get_mode`` of ``part`` within ``PEEK`` s?"""

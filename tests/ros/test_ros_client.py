@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 
 import pytest
-from ros_processes import ManagerProcess, Starter
+from ros_processes import ManagerProcess, RosContext, Starter
 
 from sm_bt.cli import main
 
@@ -144,6 +144,22 @@ def test_with_no_manager_the_commands_say_what_to_check_within_the_timeout(
     assert (code, out) == (1, "")
     assert err == ("sm-bt: error: nothing answers /pilot/get_mode within 1.5 s: is a mode manager (`sm-bt manager "
                    "MODEL`) running, with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?\n")
+
+
+def test_a_system_whose_manager_answers_one_service_late_is_not_called_a_node(
+        ros_context: RosContext, capsys: pytest.CaptureFixture[str]) -> None:
+    """A stand-in manager serves pilot as a system but its change_state does not show up in time (as
+    when a loaded machine makes discovery or the answer late): the message said "pilot is a node",
+    which it is not."""
+    from lifecycle_msgs.srv import GetAvailableStates
+    from system_modes_msgs.srv import GetMode
+
+    node = ros_context.node
+    node.create_service(GetMode, "/pilot/get_mode", lambda request, response: response)
+    node.create_service(GetAvailableStates, "/pilot/get_available_states", lambda request, response: response)
+    code, out, err = sm_bt(capsys, "state", "set", "pilot", "configure", "--timeout", "1")
+    assert (code, out) == (1, "")
+    assert "pilot is a system, and its mode manager answers get_mode but not change_state in time" in err, err
 
 
 def test_a_node_that_does_not_answer_is_told_apart_from_a_missing_manager(
