@@ -21,14 +21,16 @@ them.
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, transition_by_label
 from sm_bt.model.errors import Error
+from sm_bt.model.states import State
 from sm_bt.ros.environment import prepare, require_ros
 
 #: The state a lifecycle transition (by label) ends in when it succeeds.
@@ -207,14 +209,23 @@ class ModeClient:
         return str(self._call(GetState, part, "get_state", GetState.Request()).current_state.label)
 
     def change_state(self, part: str, transition: str) -> bool:
-        """Ask for a lifecycle transition by label; whether it was accepted."""
+        """Ask for a lifecycle transition by label; whether it was accepted.
+
+        The request carries the label and its id: lifecycle nodes (rclcpp, rclpy) and ``sm-bt
+        manager`` go by the label, the reference's ``mode_manager`` by the id alone (id 0 is
+        ``create``). ``shutdown`` has one id per start state: the part's state is asked first."""
         from lifecycle_msgs.msg import Transition
         from lifecycle_msgs.srv import ChangeState
 
         if transition not in REQUESTABLE_LABELS:
             hint = _closest(transition, list(REQUESTABLE_LABELS), "transitions")
             raise UnknownName(f"{transition!r} is not a transition{hint}")
-        request = ChangeState.Request(transition=Transition(label=transition))
+        start = State.UNCONFIGURED
+        if transition == "shutdown":
+            with contextlib.suppress(ValueError):
+                start = State.from_label(self.get_state(part))
+        transition_id = int(transition_by_label(transition, start))
+        request = ChangeState.Request(transition=Transition(id=transition_id, label=transition))
         return bool(self._call(ChangeState, part, "change_state", request).success)
 
     def wait_for_state(self, part: str, transition: str, since: float) -> float:

@@ -198,3 +198,32 @@ def test_monitor_next_to_a_running_manager_watches_and_refuses_to_act(
     # The watcher set no target (it only observes): the row is the part and its actual state.
     (row,) = [line.split() for line in out.splitlines() if line.split()[:1] == ["amcl"]]
     assert row == ["amcl", "inactive"], out
+
+
+def test_a_transition_is_sent_with_its_id_and_its_label(
+        ros_context: RosContext, capsys: pytest.CaptureFixture[str]) -> None:
+    """The reference's mode_manager reads only the id (a label-only request is id 0, ``create``,
+    which it forwards to every node); lifecycle nodes and sm-bt manager read the label. A stand-in
+    system records what arrives; ``shutdown``'s id depends on the start state, which is asked."""
+    from lifecycle_msgs.msg import State
+    from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
+
+    received: list[tuple[int, str]] = []
+
+    def change_state(request: ChangeState.Request, response: ChangeState.Response) -> ChangeState.Response:
+        received.append((request.transition.id, request.transition.label))
+        response.success = True
+        return response
+
+    def get_state(request: GetState.Request, response: GetState.Response) -> GetState.Response:
+        response.current_state = State(id=State.PRIMARY_STATE_ACTIVE, label="active")
+        return response
+
+    node = ros_context.node
+    node.create_service(ChangeState, "/pilot/change_state", change_state)
+    node.create_service(GetState, "/pilot/get_state", get_state)
+    node.create_service(GetAvailableStates, "/pilot/get_available_states", lambda request, response: response)
+    for transition in ("configure", "activate", "deactivate", "cleanup", "shutdown"):
+        assert sm_bt(capsys, "state", "set", "pilot", transition, "--timeout", "5") == (
+            0, f"pilot: {transition} accepted\n", "")
+    assert received == [(1, "configure"), (3, "activate"), (4, "deactivate"), (2, "cleanup"), (7, "shutdown")]
