@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from sm_bt.cli.common import CliError, add_lenient, bundled_names, load_or_report, plural, print_issues
-from sm_bt.model.types import Model
+from sm_bt.model.types import Model, Severity
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,6 +27,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "of a bundled model (" + ", ".join(bundled_names()) + "); a mission tree file (.xml) "
                              "is checked against the models given with it")
     add_lenient(parser)
+    parser.add_argument("--reference", action="store_true",
+                        help="also say which constructs of each model the reference manager (micro-ROS/system_modes) "
+                             "misreads or handles differently (sm_bt's extensions, ...), with their lines; exit "
+                             "status 1 if it cannot read one")
     parser.add_argument("--debug", action="store_true",
                         help="on an internal error (a bug in sm-bt), print its traceback and go on")
 
@@ -64,11 +68,28 @@ def run(args: argparse.Namespace) -> int:
         models.append((name, model))
         print(f"{name}: ok ({plural(len(model.systems), 'system')}, {plural(len(model.nodes), 'node')})")
         print_issues(model.warnings, sys.stdout)
+        if args.reference:
+            failed += not _guarded(name, args.debug, partial(_check_reference, model))
     for tree in trees:
         failed += not _guarded(tree, args.debug, partial(_check_tree_file, tree, models))
     if len(names) > 1 and (failed or len(names) > len(args.models)):  # a tally where one helps
         print(f"{plural(len(names), 'file')} checked, {failed} failed", file=sys.stderr if failed else sys.stdout)
     return 1 if failed else 0
+
+
+def _check_reference(model: Model) -> bool:
+    """Print what the reference would misread in ``model``; whether it reads it all."""
+    from sm_bt.model.reference_compat import reference_issues
+
+    issues = reference_issues(Path(model.path).read_text(encoding="utf-8"), model.path)
+    errors = [issue for issue in issues if issue.severity is Severity.ERROR]
+    print_issues(issues, sys.stderr if errors else sys.stdout)
+    if errors:
+        print(f"{model.path}: the reference cannot read it ({plural(len(errors), 'construct')})", file=sys.stderr)
+    else:
+        print(f"{model.path}: the reference reads it" + (f" ({plural(len(issues), 'difference')} in what it does)"
+                                                         if issues else ""))
+    return not errors
 
 
 def _check_tree_file(tree: str, models: list[tuple[str, Model]]) -> bool:
