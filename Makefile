@@ -62,6 +62,21 @@ bench: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
 	$(BIN)/python -m bench
 
+# sm-bt manager side by side with the reference's mode_manager (micro-ROS/system_modes, C++), built by
+# tools/reference/build.sh once per source hash (about 10 minutes the first time; cached under
+# ~/.cache/sm_bt/reference/): the same plain-rclpy scenarios on both, a side-by-side report in
+# build/interop/report.md (README, "sm_bt and the reference, measured"), then every README CLI example
+# against the reference. Exit status 1 if sm-bt manager does not do what a scenario asks.
+# Without access to github.com, SM_BT_GIT_MIRRORS names a folder of git mirrors of the sources.
+.PHONY: interop
+interop: $(STAMP)
+	@mkdir -p $(ROS_LOG_DIR) build/interop
+	prefix="$$(bash tools/reference/build.sh)" && \
+	SM_BT_REFERENCE="$$prefix" PYTHONPATH=tests/support:tests/interop \
+		$(BIN)/python tests/interop/harness.py --out build/interop && \
+	SM_BT_REFERENCE="$$prefix" SM_BT_TESTS_NEED_ALL=1 PYTHONPATH=tests/support \
+		$(BIN)/python -m pytest -q -p no:cacheprovider tests/interop/interop_cli.py
+
 # mypy cannot follow the editable install's mapping of behaviours/ and trees/ onto sm_bt.*, so it
 # checks a symlinked view of the installed layout (build/typecheck/sm_bt).
 TYPECHECK := build/typecheck
