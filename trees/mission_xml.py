@@ -30,12 +30,11 @@ BehaviorTree.CPP spellings are read too: ``ReactiveSequence``/``ReactiveFallback
 
 from __future__ import annotations
 
-import difflib
 import inspect
 import os
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,6 +49,7 @@ from py_trees.ports_utils import NOOP_LOGGER, collect_type_hints, convert_str_to
 from sm_bt.behaviours.idioms import _Subtree
 from sm_bt.behaviours.manager_access import ManagerBehaviour, attach_manager
 from sm_bt.engine.manager import ModeManager
+from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import Error
 from sm_bt.model.types import Model
 
@@ -279,7 +279,7 @@ class _Reader:
                                   f"(trees: {', '.join(self.trees) or 'none'})")
             return None
         if wanted not in self.trees:
-            self._issue(document, f"no tree {wanted!r} to execute{_did_you_mean(wanted, self.trees)}")
+            self._issue(document, f"no tree {wanted!r} to execute{did_you_mean(wanted, self.trees)}")
             return None
         return self.trees[wanted]
 
@@ -327,7 +327,7 @@ class _Reader:
         else:
             known = [*self.registry, "Sequence", "Fallback", "Selector", "Parallel", "SubTree",
                      *(cls.__name__ for cls in bt_xml.DECORATOR_NODES.values())]
-            self._issue(element, f"unknown node <{tag}>{_did_you_mean(tag, known)} (import the module that "
+            self._issue(element, f"unknown node <{tag}>{did_you_mean(tag, known)} (import the module that "
                                  "defines it, or pass it in registry=)")
             return
         for child in element:
@@ -362,7 +362,7 @@ class _Reader:
         if not identifier:
             self._issue(element, "<SubTree> needs the ID of a <BehaviorTree>")
         elif identifier not in self.trees:
-            self._issue(element, f"no tree {identifier!r}{_did_you_mean(identifier, self.trees)}")
+            self._issue(element, f"no tree {identifier!r}{did_you_mean(identifier, self.trees)}")
 
     def _check_node(self, element: ET.Element, entry: Any) -> None:
         cls = entry.func if hasattr(entry, "func") else entry
@@ -421,7 +421,7 @@ class _Reader:
     def _unknown_attributes(self, element: ET.Element, allowed: set[str]) -> bool:
         unknown = [key for key in element.attrib if key not in allowed]
         for key in unknown:
-            self._issue(element, f"<{element.tag}> has no attribute {key!r}{_did_you_mean(key, allowed)} "
+            self._issue(element, f"<{element.tag}> has no attribute {key!r}{did_you_mean(key, allowed)} "
                                  f"(attributes: {', '.join(sorted(allowed))})")
         return not unknown
 
@@ -486,11 +486,6 @@ def _parameters(cls: type) -> dict[str, inspect.Parameter]:
         if not takes_more or issubclass(klass, (ManagerBehaviour, _Subtree)):
             break
     return found
-
-
-def _did_you_mean(word: str, choices: Iterator[str] | Mapping[str, Any] | set[str] | list[str]) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def _a(hint: type) -> str:

@@ -22,13 +22,13 @@ them.
 from __future__ import annotations
 
 import contextlib
-import difflib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, transition_by_label
+from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import Error
 from sm_bt.model.states import State
 from sm_bt.ros.environment import prepare, require_ros
@@ -61,10 +61,8 @@ class NotConfirmed(Error, RuntimeError):
 
 
 def _closest(word: str, served: list[str], what: str) -> str:
-    close = difflib.get_close_matches(word, served, n=1, cutoff=0.6)
-    if close:
-        return f" (did you mean {close[0]!r}?)"
-    return f" ({what}: {', '.join(served)})" if served else ""
+    """The closest served name, or else the ones served (``what``: how to call them)."""
+    return did_you_mean(word, served) or (f" ({what}: {', '.join(served)})" if served else "")
 
 
 class ModeClient:
