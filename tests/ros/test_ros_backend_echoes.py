@@ -17,17 +17,9 @@ import pytest
 from sm_bt.engine.clock import VirtualClock
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State
-from sm_bt.ros.backend import (
-    ECHO_WINDOW,
-    VIA_GRACE,
-    RosBackend,
-    _echo,
-    _Outbox,
-    _Peer,
-    _Presence,
-    _SetInFlight,
-    _TransitionInFlight,
-)
+from sm_bt.ros.backend import VIA_GRACE, RosBackend
+from sm_bt.ros.dispatch import Dispatcher
+from sm_bt.ros.peers import ECHO_WINDOW, Peer, Presence, SetInFlight, TransitionInFlight, expected_echo
 
 pytestmark = pytest.mark.ros
 
@@ -44,28 +36,28 @@ class _Listener:
         self.parameters.append((node, dict(changed)))
 
 
-def _backend() -> tuple[RosBackend, _Peer, _Listener, VirtualClock]:
+def _backend() -> tuple[RosBackend, Peer, _Listener, VirtualClock]:
     backend = RosBackend.__new__(RosBackend)  # the bookkeeping only: no rclpy node
     clock = VirtualClock()
     listener = _Listener()
     backend._clock = clock  # type: ignore[assignment]
     backend._listener = listener  # type: ignore[assignment]
     backend._lock = threading.Lock()
-    backend._outbox = _Outbox(clock)
+    backend._dispatcher = Dispatcher(clock)
     backend._held_back = {}
     backend._held_timer = None
-    peer = _Peer("amcl", "/amcl", ("alpha",), None, None, None, None, None, None, presence=_Presence.PRESENT,
+    peer = Peer("amcl", "/amcl", ("alpha",), None, None, None, None, None, None, presence=Presence.PRESENT,
                  state=State.INACTIVE)
     return backend, peer, listener, clock
 
 
-def _send(peer: _Peer, values: dict[str, object]) -> _SetInFlight:
-    in_flight = _SetInFlight(dict(values), {name: peer.outside.get(name, 0) for name in values})  # type: ignore[arg-type]
+def _send(peer: Peer, values: dict[str, object]) -> SetInFlight:
+    in_flight = SetInFlight(dict(values), {name: peer.outside.get(name, 0) for name in values})  # type: ignore[arg-type]
     peer.sets_in_flight.append(in_flight)
     return in_flight
 
 
-def _answer(backend: RosBackend, peer: _Peer, in_flight: _SetInFlight) -> dict[str, object]:
+def _answer(backend: RosBackend, peer: Peer, in_flight: SetInFlight) -> dict[str, object]:
     peer.sets_in_flight.remove(in_flight)
     return dict(backend._confirmed_set(peer, in_flight))
 
@@ -112,24 +104,24 @@ def test_a_confirmed_transition_is_reported_once_and_its_events_are_not() -> Non
     clock.run_pending()
     assert listener.states == [State.ACTIVE] and peer.state is State.ACTIVE
     assert [state for state, _ in peer.state_echoes] == [State.ACTIVE]  # only the goal's event is to come
-    assert _echo(peer.state_echoes, State.ACTIVE, clock.now())
-    assert not _echo(peer.state_echoes, State.ACTIVATING, clock.now())  # anything later is news
+    assert expected_echo(peer.state_echoes, State.ACTIVE, clock.now())
+    assert not expected_echo(peer.state_echoes, State.ACTIVATING, clock.now())  # anything later is news
 
 
-def test_the_outbox_runs_a_burst_in_order_in_one_clock_callback_and_survives_a_bad_action() -> None:
+def test_the_dispatcher_runs_a_burst_in_order_in_one_clock_callback_and_survives_a_bad_action() -> None:
     clock = VirtualClock()
-    outbox = _Outbox(clock)
+    dispatcher = Dispatcher(clock)
     ran: list[int] = []
 
     def bad() -> None:
         raise RuntimeError("a listener bug")
 
     for action in (lambda: ran.append(1), bad, lambda: ran.append(2)):
-        outbox.put(action)
+        dispatcher.put(action)
     assert len(clock._queue) == 1 and ran == []  # one wake for the burst, nothing run inline
     clock.run_pending()
     assert ran == [1, 2]
-    outbox.put(lambda: ran.append(3))  # a later action schedules a new callback
+    dispatcher.put(lambda: ran.append(3))  # a later action schedules a new callback
     assert ran == [1, 2]
     clock.run_pending()
     assert ran == [1, 2, 3]
@@ -138,10 +130,10 @@ def test_the_outbox_runs_a_burst_in_order_in_one_clock_callback_and_survives_a_b
 def test_a_modes_parameter_request_is_built_once_and_keeps_each_values_type() -> None:
     from rcl_interfaces.msg import ParameterType
 
-    from sm_bt.ros.backend import _set_parameters_request, _typed_items
+    from sm_bt.ros.requests import set_parameters_request, typed_items
 
     def request(values: dict[str, object]) -> object:
-        return _set_parameters_request(_typed_items(values))  # type: ignore[arg-type]
+        return set_parameters_request(typed_items(values))  # type: ignore[arg-type]
 
     first = request({"speed": 1, "modes": (1, 2)})
     assert request({"speed": 1, "modes": (1, 2)}) is first, "built once per mode"
@@ -155,9 +147,9 @@ def test_a_modes_parameter_request_is_built_once_and_keeps_each_values_type() ->
     assert as_float.parameters[0].value.type == ParameterType.PARAMETER_DOUBLE  # type: ignore[attr-defined]
 
 
-def _activating(peer: _Peer) -> None:
+def _activating(peer: Peer) -> None:
     """An activate of ours in flight on ``peer`` (inactive)."""
-    peer.transitions_in_flight.append(_TransitionInFlight(State.ACTIVE, State.ACTIVATING))
+    peer.transitions_in_flight.append(TransitionInFlight(State.ACTIVE, State.ACTIVATING))
 
 
 def test_the_transition_state_of_a_quick_transition_of_ours_is_not_reported() -> None:

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import pytest
 
 from sm_bt.engine.clock import VirtualClock
-from sm_bt.ros.backend import _Outbox
+from sm_bt.ros.dispatch import Dispatcher
 
 pytestmark = pytest.mark.ros
 
@@ -28,10 +28,10 @@ def recorder() -> tuple[list[tuple[str, str]], Callable[[str], Callable[[], None
 
 def test_outside_a_callback_the_clock_runs_the_reports_in_order() -> None:
     clock = VirtualClock()
-    outbox = _Outbox(clock)
+    dispatcher = Dispatcher(clock)
     ran, action = recorder()
-    outbox.put(action("a"))
-    outbox.put(action("b"))
+    dispatcher.put(action("a"))
+    dispatcher.put(action("b"))
     assert ran == []  # never from inside the call that made them
     clock.run_pending()
     assert [name for name, _ in ran] == ["a", "b"]
@@ -39,14 +39,14 @@ def test_outside_a_callback_the_clock_runs_the_reports_in_order() -> None:
 
 def test_a_callback_runs_what_it_reported_when_it_is_done_in_its_own_thread() -> None:
     clock = VirtualClock()
-    outbox = _Outbox(clock)
+    dispatcher = Dispatcher(clock)
     ran, action = recorder()
 
     def callback() -> None:
-        with outbox.held():
-            outbox.put(action("state"))
-            with outbox.held():  # a nested callback (a future's done callback inside a handler)
-                outbox.put(action("done"))
+        with dispatcher.held():
+            dispatcher.put(action("state"))
+            with dispatcher.held():  # a nested callback (a future's done callback inside a handler)
+                dispatcher.put(action("done"))
             assert ran == []  # not before the outer callback is done
         assert clock.next_due() is None  # no hop to the clock's thread
 
@@ -58,7 +58,7 @@ def test_a_callback_runs_what_it_reported_when_it_is_done_in_its_own_thread() ->
 
 def test_a_report_made_while_another_thread_drains_is_run_by_that_thread_in_turn() -> None:
     clock = VirtualClock()
-    outbox = _Outbox(clock)
+    dispatcher = Dispatcher(clock)
     ran, action = recorder()
     inside, release = threading.Event(), threading.Event()
 
@@ -67,14 +67,14 @@ def test_a_report_made_while_another_thread_drains_is_run_by_that_thread_in_turn
         release.wait(5.0)
         ran.append(("slow", threading.current_thread().name))
 
-    outbox.put(slow)
+    dispatcher.put(slow)
     draining = threading.Thread(target=clock.run_pending, name="clock")
     draining.start()
     assert inside.wait(5.0)
 
     def callback() -> None:
-        with outbox.held():
-            outbox.put(action("answer"))
+        with dispatcher.held():
+            dispatcher.put(action("answer"))
 
     heard = threading.Thread(target=callback, name="executor")
     heard.start()
@@ -86,33 +86,33 @@ def test_a_report_made_while_another_thread_drains_is_run_by_that_thread_in_turn
 
 
 def test_a_report_that_fails_does_not_hold_back_the_next() -> None:
-    outbox = _Outbox(VirtualClock())
+    dispatcher = Dispatcher(VirtualClock())
     ran, action = recorder()
 
     def broken() -> None:
         raise RuntimeError("a listener's bug")
 
-    with outbox.held():
-        outbox.put(broken)
-        outbox.put(action("next"))
+    with dispatcher.held():
+        dispatcher.put(broken)
+        dispatcher.put(action("next"))
     assert [name for name, _ in ran] == ["next"]
 
 
 def test_a_callback_that_reported_nothing_leaves_the_others_reports_to_them() -> None:
-    outbox = _Outbox(VirtualClock())
+    dispatcher = Dispatcher(VirtualClock())
     ran, action = recorder()
     queued, leave = threading.Event(), threading.Event()
 
     def backend_callback() -> None:
-        with outbox.held():
-            outbox.put(action("answer"))
+        with dispatcher.held():
+            dispatcher.put(action("answer"))
             queued.set()
             leave.wait(5.0)
 
     backend = threading.Thread(target=backend_callback, name="backend")
     backend.start()
     assert queued.wait(5.0)
-    with outbox.held():  # the watching executor's probe answer, which reports nothing
+    with dispatcher.held():  # the watching executor's probe answer, which reports nothing
         pass
     assert ran == []  # not run here: this thread's next answer is not held back by them
     leave.set()

@@ -33,7 +33,7 @@ from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 from sm_bt.engine.backend import CallResult, NodeReport
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State, StateMode
-from sm_bt.ros.backend import _Call
+from sm_bt.ros.peers import NodeCall
 from sm_bt.ros.runtime import RosRuntime
 
 pytestmark = pytest.mark.ros
@@ -96,7 +96,7 @@ def test_the_calls_of_a_finished_change_leave_nothing_for_the_garbage_collector(
         settle(pilot, manager.change_state("pilot", "configure"))
         settle(pilot, manager.change_mode("pilot", "f_performance_mode"))
         time.sleep(0.2)  # late answers and events of the change, dropped or matched
-        left = [o for o in gc.get_objects() if isinstance(o, _Call) and o.finished]
+        left = [o for o in gc.get_objects() if isinstance(o, NodeCall) and o.finished]
     finally:
         gc.enable()
     assert left == []
