@@ -17,27 +17,25 @@ How requests interact (the semantics the README states):
 * A request that is refused (unknown part or mode, a transition invalid where the part is or is
   heading) changes nothing and is done at once.
 
-Nothing here blocks; time comes from the backend's clock. Every entry point is serialised by
-one re-entrant lock, so reports may arrive from any thread; the outermost entry then *settles*:
-it works through the agenda (plans handing over to their next steps), re-examines the
-divergences that changed and reacts to faults, until nothing is left to do, and only then tells
-the observers. The work per event is proportional to what the event changed.
+Nothing here blocks; time comes from the backend's clock. Every entry point is serialised
+(:mod:`sm_bt.engine.serialiser`): the outermost entry settles, working through the agenda (plans
+handing over to their next steps), re-examining the divergences that changed and reacting to
+faults until nothing is left to do, and only then tells the observers. The work per event is
+proportional to what the event changed.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from types import TracebackType
 
-from sm_bt.engine.backend import Backend, CallResult, Done, NodeReport
+from sm_bt.engine.backend import Backend, Done, NodeReport
 from sm_bt.engine.clock import TimerHandle
 from sm_bt.engine.divergences import Divergences
 from sm_bt.engine.drivers import NodeDriver
-from sm_bt.engine.events import Divergence, Event, EventKind, Observer, Outbox, Subscription
+from sm_bt.engine.events import Divergence, Event, EventKind, Observer, Subscription
 from sm_bt.engine.executions import Execution
 from sm_bt.engine.hierarchy import Hierarchy, child_targets, implied_targets
 from sm_bt.engine.inference import Actual, Changes, Inference, NodeObservation
@@ -52,6 +50,7 @@ from sm_bt.engine.lifecycle import (
 )
 from sm_bt.engine.reactions import FireRule, GiveUp, Reactions, Restore
 from sm_bt.engine.requests import Origin, Request
+from sm_bt.engine.serialiser import Serialiser
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
@@ -67,45 +66,6 @@ CLOSED = "the manager is closed"
 _GOAL = {step.transition: step.goal for step in REQUESTABLE}
 #: Settling passes before the manager reports that it could not settle (a bug, not a model).
 _MAX_PASSES = 100_000
-
-
-class _Entry:
-    """``with manager._entry():`` (a class, not a generator: entered on every report)."""
-
-    __slots__ = ("_manager",)
-
-    def __init__(self, manager: ModeManager) -> None:
-        self._manager = manager
-
-    def __enter__(self) -> None:
-        manager = self._manager
-        manager._lock.acquire()
-        manager._depth += 1
-
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:
-        manager = self._manager
-        try:
-            manager._depth -= 1
-            if kind is None and not manager._depth and not manager._closed:
-                manager._settle_and_notify()
-        finally:
-            manager._lock.release()
-
-
-class _Serialised:
-    """A backend's ``done`` for a call of the manager's: runs ``done`` inside an entry (an object,
-    not a closure: one per call in flight, and a bring-up has one for every node at once)."""
-
-    __slots__ = ("_done", "_entry")
-
-    def __init__(self, entry: _Entry, done: Done) -> None:
-        self._entry = entry
-        self._done = done
-
-    def __call__(self, result: CallResult) -> None:
-        with self._entry:
-            self._done(result)
 
 
 class ModeManager:
@@ -127,8 +87,8 @@ class ModeManager:
         self.backend = backend
         self.clock = backend.clock
         self.request_timeout = request_timeout
-        self._lock = threading.RLock()
-        self._entered = _Entry(self)
+        self._serial = Serialiser(self._settle, lambda: self._divergences.pending)
+        self._lock = self._serial.lock
         self._hierarchy = Hierarchy.of(model)
         self._inference = Inference(model, self._hierarchy)
         self._divergences = Divergences(model, self._hierarchy, self._inference, grace_period)
@@ -146,14 +106,9 @@ class ModeManager:
         self._reported: set[str] = set()  # divergences already logged as errors
         self._away: dict[str, tuple[float, StateMode]] = {}  # vanished nodes: since when, and as they were
         self._returns: dict[str, Return] = {}  # the last time each node came back
-        self._agenda: deque[Callable[[], None]] = deque()
-        self._outbox = Outbox()
-        # A tuple, replaced on (un)subscribe: notifying iterates it with no copy.
-        self._subscriptions: tuple[Subscription, ...] = ()
-        self._depth = 0
+        self._outbox = self._serial.outbox
         self._grace_timer: TimerHandle | None = None
         self._grace_due: float | None = None
-        self._closed = False
         with self._entry():
             backend.attach([node.name for node in model.nodes], _Listener(self))
 
@@ -322,11 +277,7 @@ class ModeManager:
         parts = None if part is None else frozenset([part] if isinstance(part, str) else part)
         for name in parts or ():
             self._check_part(name)
-        subscription = Subscription(callback, parts, None if kinds is None else frozenset(kinds),
-                                    self._unsubscribe)
-        with self._lock:
-            self._subscriptions = (*self._subscriptions, subscription)
-        return subscription
+        return self._serial.subscribe(callback, parts, kinds)
 
     def close(self) -> None:
         """Stop: cancel requests in flight and timers, detach from the backend."""
@@ -335,7 +286,7 @@ class ModeManager:
                 self.finish(execution, False, CLOSED)
             if self._grace_timer is not None:
                 self._grace_timer.cancel()
-            self._closed = True
+            self._serial.closed = True
             self.backend.detach()
 
     # -- node reports (from the backend) ----------------------------------------------------------
@@ -419,14 +370,11 @@ class ModeManager:
 
     def _send_transition(self, node: str, transition: Transition, done: Done) -> None:
         log.debug("  %s: %s", node, transition.label)
-        self.backend.change_state(node, transition, self._serialised(done))
+        self.backend.change_state(node, transition, self._serial.serialised(done))
 
     def _send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         log.debug("  %s: set %d parameters", node, len(parameters))
-        self.backend.set_parameters(node, parameters, self._serialised(done))
-
-    def _serialised(self, done: Done) -> Done:
-        return _Serialised(self._entered, done)
+        self.backend.set_parameters(node, parameters, self._serial.serialised(done))
 
     # -- executions -------------------------------------------------------------------------------
 
@@ -446,7 +394,7 @@ class ModeManager:
 
     def _start(self, part: str, target: StateMode, description: str, origin: Origin,
                timeout: float | None, transition: Transition | None = None, *, requester: str | None = None) -> Request:
-        if self._closed:  # detached from the backend: nothing it starts could ever end
+        if self._serial.closed:  # detached from the backend: nothing it starts could ever end
             return self._refuse(part, description, CLOSED, requester)
         implied = implied_targets(self.model, part, target)
         scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
@@ -493,7 +441,7 @@ class ModeManager:
 
     def _run(self, execution: Execution, timeout: float | None) -> None:
         request = execution.request
-        request._progress = lambda: self._locked(execution.feedback)
+        request._progress = lambda: self._serial.locked(execution.feedback)
         self._executions[request.id] = execution
         self._divergences.busy(execution.scope, +1)
         limit = self.request_timeout if timeout is None else timeout
@@ -585,7 +533,7 @@ class ModeManager:
                 self.finish(execution, False, f"timed out after {limit:g} s ({execution.stall()})")
 
     def later(self, action: Callable[[], None]) -> None:
-        self._agenda.append(action)
+        self._serial.later(action)
 
     # -- reactions --------------------------------------------------------------------------------
 
@@ -635,33 +583,16 @@ class ModeManager:
 
     # -- plumbing ---------------------------------------------------------------------------------
 
-    def _entry(self) -> _Entry:
-        """Every entry point: serialise; the outermost one then settles and notifies observers.
-        Observers may call back in: those calls only queue their effects, which the outermost
-        entry settles before it returns."""
-        return self._entered
-
-    def _settle_and_notify(self) -> None:
-        self._depth += 1
-        try:
-            self._settle()
-            while (event := self._outbox.pop()) is not None:
-                self._notify(event)
-                if self._agenda or self._divergences.pending:  # an observer called in
-                    self._settle()
-        finally:
-            self._depth -= 1
-
-    def _locked(self, read: Callable[[], str]) -> str:
-        with self._lock:
-            return read()
+    def _entry(self) -> Serialiser:
+        """Every entry point: serialised; the outermost one then settles and notifies observers
+        (:mod:`sm_bt.engine.serialiser`)."""
+        return self._serial
 
     def _settle(self) -> None:
         """Work until nothing is left: the agenda, then the divergences that changed and the
         reactions to faults (which may put more on the agenda)."""
         for _ in range(_MAX_PASSES):
-            while self._agenda:
-                self._agenda.popleft()()
+            self._serial.run_agenda()
             if not self._divergences.pending:
                 self._schedule_grace()
                 return
@@ -704,14 +635,6 @@ class ModeManager:
             self._grace_due = None
             self._divergences.grace_over(self.clock.now())
 
-    def _notify(self, event: Event) -> None:
-        for subscription in self._subscriptions:
-            if subscription.everything or subscription.wants(event):
-                try:
-                    subscription.callback(event)
-                except Exception:  # an observer's bug must not break the manager
-                    log.exception("observer %r failed on %s", subscription.callback, event.kind.value)
-
     def _emit(self, kind: EventKind, part: str, text: str = "", *, target: StateMode | None = None,
               divergence: Divergence | None = None, request: Request | None = None,
               previous: Actual | None = None, transition: Transition | None = None) -> None:
@@ -731,10 +654,6 @@ class ModeManager:
             if part in confirming:
                 for execution in list(confirming[part]):
                     self.confirm(execution)
-
-    def _unsubscribe(self, subscription: Subscription) -> None:
-        with self._lock:
-            self._subscriptions = tuple(s for s in self._subscriptions if s is not subscription)
 
     def _check_part(self, part: str) -> None:
         if part not in self.model.parts:
