@@ -1,30 +1,39 @@
-"""An execution: a request being carried out, with its plan and what the manager keeps for it."""
+"""Requests being carried out: admission (what a request drives, what it preempts, whether it
+is refused), one :class:`Execution` per request with its plan, and their ends (confirmed,
+failed, withdrawn, timed out).
+
+* **The last request wins.** A request preempts every request in flight that drives one of the
+  same nodes (or asks for the same part): those end FAILURE "preempted by request #N (...)".
+  The new one starts from where the nodes are heading; what a preempted request asked of the
+  nodes the new one does not drive carries on as a *continuation*.
+* A request ends SUCCESS once every node reached its goal and the part's inferred actual is the
+  target; FAILURE with the reason as soon as one step cannot be taken, or ``timeout`` runs out.
+* A user request for a node out of reach (vanished, finalized) is refused as a whole: nothing
+  changes.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Protocol
+import logging
+from collections.abc import Callable, Iterable, Mapping
 
-from sm_bt.engine.clock import TimerHandle
+from sm_bt.engine.clock import Clock, TimerHandle
+from sm_bt.engine.divergences import Divergences
 from sm_bt.engine.drivers import NodeDriver
+from sm_bt.engine.events import EventKind
+from sm_bt.engine.hierarchy import implied_targets
+from sm_bt.engine.ledger import Ledger
+from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.plans import Sequence, Step, build_plan
+from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
-from sm_bt.model.states import StateMode
-from sm_bt.model.types import Model
+from sm_bt.engine.serialiser import Serialiser
+from sm_bt.model.states import State, StateMode
+from sm_bt.model.types import NodePart
 
-
-class Host(Protocol):
-    """The manager, as an execution sees it."""
-
-    model: Model
-
-    def later(self, action: Callable[[], None]) -> None: ...
-
-    def driver(self, node: str) -> NodeDriver: ...
-
-    def confirm(self, execution: Execution) -> None: ...
-
-    def finish(self, execution: Execution, succeeded: bool, reason: str) -> None: ...
+log = logging.getLogger("sm_bt.manager")
+#: Why a request fails or is refused once the manager is closed.
+CLOSED = "the manager is closed"
 
 
 class Execution:
@@ -36,7 +45,7 @@ class Execution:
     they reached their goals (the part as a whole is no longer expected to reach the target).
     """
 
-    def __init__(self, host: Host, request: Request, scope: frozenset[str],
+    def __init__(self, host: Executions, request: Request, scope: frozenset[str],
                  previous_targets: dict[str, tuple[StateMode | None, Origin | None]],
                  continuation: bool = False) -> None:
         self.host = host
@@ -101,3 +110,189 @@ class Execution:
         if not running:
             return self.feedback()
         return "; ".join(self.driver(s.node).stall() for s in running)
+
+
+class Executions:
+    """The requests in progress, carried out on ``drivers`` (one per node) and booked in ``ledger``.
+    ``renew_budgets(parts)``: a user asked for ``parts``, so rules and recovery may act on them again."""
+
+    def __init__(self, ledger: Ledger, divergences: Divergences, reactions: Reactions,
+                 drivers: Mapping[str, NodeDriver], serialiser: Serialiser, clock: Clock, *,
+                 request_timeout: float, renew_budgets: Callable[[Iterable[str]], None]) -> None:
+        self.model = ledger.model
+        self.request_timeout = request_timeout
+        self._ledger = ledger
+        self._inference = ledger.inference
+        self._divergences = divergences
+        self._reactions = reactions
+        self._drivers = drivers
+        self._serialiser = serialiser
+        self._clock = clock
+        self._renew_budgets = renew_budgets
+        self._executions: dict[int, Execution] = {}
+        self._confirming: dict[str, set[Execution]] = {}  # part -> executions waiting for its actual
+        ledger.reached = self._reached
+
+    # -- what executions need (see Execution) ------------------------------------------------------
+
+    def later(self, action: Callable[[], None]) -> None:
+        self._serialiser.later(action)
+
+    def driver(self, node: str) -> NodeDriver:
+        return self._drivers[node]
+
+    # -- queries -----------------------------------------------------------------------------------
+
+    def requests(self) -> list[Request]:
+        return [e.request for e in self._executions.values()]
+
+    def driving(self, node: str) -> list[Execution]:
+        """The executions whose plans drive ``node``."""
+        return [e for e in self._executions.values() if node in e.scope]
+
+    def in_progress(self) -> list[Execution]:
+        return list(self._executions.values())
+
+    # -- admission ---------------------------------------------------------------------------------
+
+    def start(self, part: str, target: StateMode, description: str, origin: Origin,
+              timeout: float | None, transition: Transition | None = None, *, requester: str | None = None) -> Request:
+        """Carry out a request for ``target`` of ``part`` (an active mode resolved); the request
+        that preempts what it overlaps, or a refused one."""
+        if self._serialiser.closed:  # detached from the backend: nothing it starts could ever end
+            return self.refuse(part, description, CLOSED, requester)
+        implied = implied_targets(self.model, part, target)
+        scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
+        if origin is Origin.USER:
+            why = "; ".join(filter(None, (self._out_of_reach(n, t) for n, t in implied if n in scope)))
+            if why:  # refused as a whole: nothing is changed
+                return self.refuse(part, description, why, requester)
+        request = Request(part, target, description, origin, self._clock.now(), withdraw=self._withdraw,
+                          requester=requester)
+        # A rule's or recovery's request follows its own log line: the start is detail then.
+        (log.info if origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id, description,
+                                                           request.requester)
+        preempted = [e for e in self._executions.values() if e.scope & scope or e.request.part == part]
+        for execution in preempted:
+            self.finish(execution, False, f"preempted by request #{request.id} ({description})")
+        previous = self._assign_targets(implied, origin, transition)
+        if origin is Origin.USER:
+            self._renew_budgets(previous)
+        self._run(Execution(self, request, scope, previous), timeout)
+        # The last request wins where it drives; elsewhere what the preempted ones asked for stands.
+        for execution in preempted:
+            if execution.scope - scope:
+                self._continue(execution, execution.scope - scope)
+        return request
+
+    def refuse(self, part: str, description: str, reason: str, requester: str | None = None) -> Request:
+        now = self._clock.now()
+        request = Request(part, StateMode(State.UNKNOWN), description, Origin.USER, now, requester=requester)
+        log.warning("request %s refused: %s", description, reason)
+        request.refused = True
+        request._finish(False, reason, now)
+        return request
+
+    def _out_of_reach(self, node: str, target: StateMode) -> str:
+        """Why ``node`` cannot be taken to ``target`` as far as the manager knows ("" if it can)."""
+        obs = self._inference.observation(node)
+        if obs.gone:
+            return f"{node} is not reachable ({obs.gone})"
+        if obs.state is State.FINALIZED and target.state is not State.FINALIZED:
+            return f"{node} is finalized (it must be restarted)"
+        return ""
+
+    def _continue(self, preempted: Execution, nodes: frozenset[str]) -> None:
+        """Carry on with ``nodes`` of a preempted request: their targets are still what it asked."""
+        old = preempted.request
+        description = f"continue #{old.id} ({old.description}) for {', '.join(sorted(nodes))}"
+        request = Request(old.part, old.target, description, old.origin, self._clock.now(), withdraw=self._withdraw,
+                          requester=old.requester, parts=tuple(sorted(nodes)))
+        (log.info if old.origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id,
+                                                               description, request.requester)
+        self._run(Execution(self, request, nodes, {}, continuation=True), None)
+
+    def _run(self, execution: Execution, timeout: float | None) -> None:
+        request = execution.request
+        request._progress = lambda: self._serialiser.locked(execution.feedback)
+        self._executions[request.id] = execution
+        self._divergences.busy(execution.scope, +1)
+        limit = self.request_timeout if timeout is None else timeout
+        execution.timer = self._clock.call_later(limit, lambda: self._timed_out(execution, limit))
+        self._ledger.emit(EventKind.REQUEST, request.part, f"#{request.id} {request.description} started",
+                          request=request)
+        execution.start()
+
+    def _assign_targets(self, implied: list[tuple[str, StateMode]], origin: Origin,
+                        transition: Transition | None) -> dict[str, tuple[StateMode | None, Origin | None]]:
+        """Set the targets (the requested part first, then top-down below it); return what they
+        were, with who had chosen them."""
+        previous: dict[str, tuple[StateMode | None, Origin | None]] = {}
+        for index, (name, value) in enumerate(implied):
+            previous[name] = (self._inference.target(name), self._divergences.chosen_by(name))
+            self._ledger.set_target(name, value, transition if index == 0 else None)
+            if index > 0:
+                self._divergences.chosen(name, None)
+            elif origin is not Origin.RECOVERY:  # restoring a node keeps who chose its target
+                self._divergences.chosen(name, origin)
+        return previous
+
+    # -- ends --------------------------------------------------------------------------------------
+
+    def confirm(self, execution: Execution) -> None:
+        """The plan is done: succeed once every part the request is about is at its target (the
+        request's part at the request's target; a continuation's nodes at theirs)."""
+        request = execution.request
+        off = []
+        for part in request.parts:
+            wanted = self._inference.target(part) if execution.continuation else request.target
+            if wanted is not None and not self._inference.actual(part).is_(wanted):
+                off.append(part)
+        if not off:
+            self.finish(execution, True, "")
+        for part in off:
+            self._confirming.setdefault(part, set()).add(execution)
+            self._ledger.waiting.add(part)
+
+    def _reached(self, part: str) -> None:
+        """``part``'s actual changed (the ledger): the executions waiting on it look again."""
+        for execution in list(self._confirming.get(part, ())):
+            self.confirm(execution)
+
+    def finish(self, execution: Execution, succeeded: bool, reason: str) -> None:
+        if not execution.active:
+            return
+        execution.stop()
+        request = execution.request
+        self._executions.pop(request.id, None)
+        for part in request.parts:
+            waiting = self._confirming.get(part)
+            if waiting is not None:
+                waiting.discard(execution)
+                if not waiting:
+                    del self._confirming[part]
+                    self._ledger.waiting.discard(part)
+        self._divergences.busy(execution.scope, -1)
+        now = self._clock.now()
+        if request.origin is not Origin.USER:
+            self._reactions.finished(request.part, succeeded, reason)
+        outcome = f"succeeded in {now - request.created:.2f} s" if succeeded else f"failed: {reason}"
+        (log.info if succeeded else log.warning)("request #%d %s %s", request.id, request.description, outcome)
+        self._ledger.emit(EventKind.REQUEST, request.part, f"#{request.id} {request.description} {outcome}",
+                          request=request)
+        request._finish(succeeded, reason, now)
+
+    def _withdraw(self, request: Request) -> None:
+        with self._serialiser:
+            execution = self._executions.get(request.id)
+            if execution is None:
+                return
+            for part, (target, chosen_by) in execution.previous_targets.items():
+                self._ledger.set_target(part, target)
+                self._divergences.chosen(part, chosen_by)
+            self.finish(execution, False, "cancelled")
+
+    def _timed_out(self, execution: Execution, limit: float) -> None:
+        with self._serialiser:
+            if execution.active:
+                self.finish(execution, False, f"timed out after {limit:g} s ({execution.stall()})")

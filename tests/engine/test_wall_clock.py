@@ -83,13 +83,24 @@ def test_a_request_times_out_on_the_wall_clock(clock: WallClock) -> None:
     model = bundled("pilot")
     backend = SimBackend(model)
     backend.hang_next("amcl", Transition.CONFIGURE)
-    manager = ModeManager(model, backend)
-    manager.clock = clock  # the backend's virtual clock drives the nodes; only the timeout is real
+    manager = ModeManager(model, _WallTimed(backend, clock))
     done = threading.Event()
     request = manager.change_state("pilot", "configure", timeout=0.05)
     request.add_done_callback(lambda _: done.set())
     assert done.wait(2.0)
     assert not request.succeeded and "timed out after 0.05 s" in request.reason
+
+
+class _WallTimed:
+    """The simulated backend, with the wall clock as the manager's: the backend's virtual clock
+    drives the nodes, and only the request's timeout is real."""
+
+    def __init__(self, backend: SimBackend, clock: WallClock) -> None:
+        self._backend = backend
+        self.clock = clock
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._backend, name)
 
 
 class _Callback:
