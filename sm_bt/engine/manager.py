@@ -13,8 +13,9 @@ It is a façade over the pieces that do the work, each with its own module:
 * :mod:`~sm_bt.engine.executions`: requests carried out (the last request wins; a refused request
   changes nothing and is done at once; the semantics the README states);
 * :mod:`~sm_bt.engine.presence`: what the backend reports of the nodes;
-* :mod:`~sm_bt.engine.divergences` and :mod:`~sm_bt.engine.reactions`: divergences, their grace
-  periods, and the rules and recovery that answer them (dispatched here, :meth:`ModeManager._react`).
+* :mod:`~sm_bt.engine.divergences`, :mod:`~sm_bt.engine.responses` and
+  :mod:`~sm_bt.engine.reactions`: divergences, their grace periods, and the rules and recovery
+  that answer them.
 
 Nothing here blocks; time comes from the backend's clock. Settling works through the agenda (plans
 handing over to their next steps), re-examines the divergences that changed and reacts to faults,
@@ -28,10 +29,10 @@ import threading
 from collections.abc import Iterable, Mapping
 
 from sm_bt.engine.backend import Backend, Done
-from sm_bt.engine.clock import Clock, TimerHandle
+from sm_bt.engine.clock import Clock
 from sm_bt.engine.divergences import Divergences
 from sm_bt.engine.drivers import NodeDriver
-from sm_bt.engine.events import Divergence, Event, EventKind, Observer, Subscription
+from sm_bt.engine.events import Divergence, EventKind, Observer, Subscription
 from sm_bt.engine.executions import CLOSED, Executions
 from sm_bt.engine.hierarchy import Hierarchy, implied_targets
 from sm_bt.engine.inference import Actual, Inference, NodeObservation
@@ -45,8 +46,9 @@ from sm_bt.engine.lifecycle import (
     transition_by_label,
 )
 from sm_bt.engine.presence import NodeReports, Return
-from sm_bt.engine.reactions import FireRule, GiveUp, Reactions, Restore
+from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
+from sm_bt.engine.responses import Responses
 from sm_bt.engine.serialiser import Serialiser
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import RequestError
@@ -93,14 +95,12 @@ class ModeManager:
         self._ledger = Ledger(model, self._inference, self._divergences, self._serial.outbox, self.clock)
         io = _BackendIO(self._inference, self.clock, backend, self._serial)
         self._drivers = {node.name: NodeDriver(node.name, io) for node in model.nodes}
+        self._responses = Responses(self._ledger, self._divergences, self._reactions, self._serial, self.clock)
+        renew = self._responses.renew_budgets
         self._executions = Executions(self._ledger, self._divergences, self._reactions, self._drivers, self._serial,
-                                      self.clock, request_timeout=request_timeout,
-                                      renew_budgets=self._renew_budgets)
+                                      self.clock, request_timeout=request_timeout, renew_budgets=renew)
         self._reports = NodeReports(self._ledger, self._divergences, self._executions, self._hierarchy,
-                                    self._drivers, self._serial, self.clock, renew_budgets=self._renew_budgets)
-        self._reported: set[str] = set()  # divergences already logged as errors
-        self._grace_timer: TimerHandle | None = None
-        self._grace_due: float | None = None
+                                    self._drivers, self._serial, self.clock, renew_budgets=renew)
         with self._serial:
             backend.attach([node.name for node in model.nodes], self._reports)
 
@@ -280,8 +280,7 @@ class ModeManager:
         with self._serial:
             for execution in self._executions.in_progress():
                 self._executions.finish(execution, False, CLOSED)
-            if self._grace_timer is not None:
-                self._grace_timer.cancel()
+            self._responses.cancel()
             self._serial.closed = True
             self.backend.detach()
 
@@ -301,34 +300,7 @@ class ModeManager:
             wanted = StateMode(State.ACTIVE, resolved)
         return self._executions.start(part, wanted, description, Origin.USER, timeout, requester=requester)
 
-    # -- reactions --------------------------------------------------------------------------------
-
-    def _react(self, faults: list[Divergence]) -> None:
-        for action in self._reactions.decide(faults, _ReactionView(self._inference, self._divergences)):
-            if isinstance(action, FireRule):
-                rule = action.rule
-                message = f"rule {rule.name}: {rule.if_part} is {rule.if_part_state} -> {rule.new_target}"
-                log.info("%s: %s (attempt %d of %d)", rule.system, message, action.attempt, self.recovery_attempts)
-                self._ledger.emit(EventKind.RULE, rule.system, message)
-                self._executions.start(rule.system, rule.new_target, f"rule {rule.name} of {rule.system}", Origin.RULE,
-                                       None)
-            elif isinstance(action, Restore):
-                log.warning("restoring %s to %s (attempt %d of %d)", action.node, action.target, action.attempt,
-                            self.recovery_attempts)
-                self._executions.start(action.node, action.target, f"restore {action.node} to {action.target}",
-                                       Origin.RECOVERY, None)
-            elif isinstance(action, GiveUp):
-                part = action.divergence.part
-                log.error("%s", action.message)
-                self._divergences.note(part, action.message)
-                self._ledger.emit(EventKind.FAILED, part, action.message, divergence=action.divergence)
-
-    def _renew_budgets(self, parts: Iterable[str]) -> None:
-        """Rules and recovery may act on ``parts`` again (a user asked for them, or a node restarted)."""
-        for part in parts:
-            if part in self._reactions.gave_up:
-                self._divergences.note(part, None)
-        self._reactions.reset(parts)
+    # -- reachability ---------------------------------------------------------------------------
 
     def _moving(self, part: str) -> bool:
         """A request in flight is working on ``part`` (or on a node below it)."""
@@ -356,46 +328,15 @@ class ModeManager:
         for _ in range(_MAX_PASSES):
             self._serial.run_agenda()
             if not self._divergences.pending:
-                self._schedule_grace()
+                self._responses.schedule_grace()
                 return
             now = self.clock.now()
             changes, faults = self._divergences.evaluate(now)
             for change in changes:
-                self._divergence_changed(change.part, change.old, change.new, now)
-            if faults:
-                self._react(faults)
+                self._responses.changed(change.part, change.new, now)
+            for reaction in self._responses.react(faults) if faults else ():
+                self._executions.start(reaction.part, reaction.target, reaction.description, reaction.origin, None)
         log.error("the manager did not settle after %d passes; stopped to stay responsive", _MAX_PASSES)
-
-    def _divergence_changed(self, part: str, old: Divergence | None, new: Divergence | None, now: float) -> None:
-        if new is None:
-            self._reported.discard(part)
-            self._reactions.back_on_target(part, now)
-            self._ledger.put(Event(EventKind.DIVERGENCE, part, now, "", self._inference.actual(part),
-                                   self._inference.target(part)))
-            return
-        if new.is_error and part not in self._reported:  # once per divergence, not per attempt
-            self._reported.add(part)
-            why = f": {new.reason}" if new.reason else ""
-            log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s%s).",
-                        part, new.target, new.actual, new.cause.value, why)
-        self._ledger.put(Event(EventKind.DIVERGENCE, part, now, "", new.actual, None, new))
-
-    def _schedule_grace(self) -> None:
-        """One timer, for the earliest grace period still running (a timer that fires for a grace
-        period that ended early leaves the next one to be scheduled here, after settling)."""
-        due = self._divergences.next_due()
-        if due is None or (self._grace_due is not None and self._grace_due <= due):
-            return
-        if self._grace_timer is not None:
-            self._grace_timer.cancel()
-        self._grace_due = due
-        self._grace_timer = self.clock.call_later(due - self.clock.now(), self._grace_over)
-
-    def _grace_over(self) -> None:
-        with self._serial:
-            self._grace_timer = None
-            self._grace_due = None
-            self._divergences.grace_over(self.clock.now())
 
     def _check_part(self, part: str) -> None:
         if part not in self.model.parts:
@@ -422,16 +363,6 @@ class ModeManager:
         if isinstance(transition, int):
             return Transition(transition)
         return transition_by_label(transition, current)
-
-
-class _ReactionView:
-    """The manager as rules and recovery see it."""
-
-    def __init__(self, inference: Inference, divergences: Divergences) -> None:
-        self.actual = inference.actual
-        self.target = inference.target
-        self.observation = inference.observation
-        self.chosen_by = divergences.chosen_by
 
 
 class _BackendIO:
