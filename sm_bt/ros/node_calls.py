@@ -56,9 +56,15 @@ class NodeCalls:
             after, on_late = late
 
             def overdue() -> None:
-                call.timer = self._clock.call_later(timeout - after, expire)
-                if not call.finished:
-                    on_late(call)
+                if call.finished:  # its end cancelled this timer too late: nothing to re-arm
+                    return
+                timer = self._clock.call_later(timeout - after, expire)
+                call.timer = timer
+                if call.finished:  # ended by another thread meanwhile, which cancelled the timer before
+                    timer.cancel()
+                    call.timer = None
+                    return
+                on_late(call)
             call.timer = self._clock.call_later(after, overdue)
         else:
             call.timer = self._clock.call_later(timeout, expire)
