@@ -35,7 +35,7 @@ NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
 UDP_ONLY = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 #: The verdict: silent for the window (0.9 s on a quiet machine; on one so loaded that the probes were
 #: answered slowly, the backend has learned a wider one, and says so).
-REASON = re.compile(r"no answer from /(\w+) for (?:0\.9|[1-9]\d*\.\d) s \(node exited, or network unreachable\)")
+REASON = re.compile(r"no answer from /(\w+) for (0\.9|[1-9]\d*\.\d) s \(node exited, or network unreachable\)")
 
 
 def test_the_defaults_are_the_ones_these_tests_time() -> None:
@@ -128,10 +128,14 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
         request = manager.change_mode("pilot", "f_normal_mode")
         assert not request.refused, "the manager did not know yet: accepted"
         took = wait_until(lambda: request.done, 5.0, "the request did not end")
-        assert took <= WINDOW + LATENCY, f"ended {took:.2f} s after the node stopped answering (stopped at " \
-                                         f"{stopped.at:.2f})"
         assert not request.succeeded
-        assert REASON.search(request.reason), request.reason
+        verdict = REASON.search(request.reason)
+        assert verdict, request.reason
+        # The window the verdict names: 0.9 s, or wider where the backend learned from slow probes
+        # (a loaded machine) that the link is slow.
+        window = max(WINDOW, float(verdict.group(2)))
+        assert took <= window + LATENCY, f"ended {took:.2f} s after the node stopped answering (stopped at " \
+                                         f"{stopped.at:.2f}, window {window:g} s)"
         # The configure requests abandoned unanswered are dropped with their clients: a DDS writer
         # would send them again once the node answers, and the node would configure late.
         wait_until(lambda: not any(manager.observation(name).reachable for name in NODES), 1.0, "not all unreachable")
@@ -150,7 +154,7 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
 
         wait_until(lambda: failed(), 2.0, "the failure is not on /diagnostics")
         arrived, status = failed()[0]
-        assert arrived - stopped.at <= WINDOW + LATENCY + 0.1
+        assert arrived - stopped.at <= window + LATENCY + 0.1
         assert REASON.search(_values(status)["last_request_reason"]), _values(status)
         assert status.name == "sm_bt_liveness_test: pilot"
         # Each node's verdict reaches /diagnostics with the next gathering (the request's failure went
