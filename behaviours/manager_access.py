@@ -24,7 +24,7 @@ from py_trees.ports import PortInformation, PortsMixin
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import Error, RequestError
-from sm_bt.model.types import DEFAULT_MODE, Model
+from sm_bt.model.types import DEFAULT_MODE, Model, resolve_mode
 
 #: What sm_bt's behaviours say they are when they ask the manager for a change
 #: (:attr:`~sm_bt.engine.requests.Request.requester`).
@@ -200,9 +200,8 @@ class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False)
         self._check_part(model, part)
         require_mode_name(self.name, part, mode)
         spec = model.parts[part]
-        if mode in spec.modes:
-            return mode
-        if mode == DEFAULT_MODE:
-            return spec.default_mode
+        resolved = resolve_mode(spec, mode)
+        if resolved is not None:
+            return resolved
         raise RequestError(f"{self.qualified_name}: {part} has no mode {mode!r}{did_you_mean(mode, spec.modes)} "
                            f"(modes: {', '.join(sorted(spec.modes))})")

@@ -27,7 +27,6 @@ import contextlib
 import gc
 import json
 import os
-import signal
 import statistics
 import subprocess
 import sys
@@ -43,6 +42,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodeMode
 from sm_bt.ros.cdr import parameter_event_node
+from sm_bt.ros.node_process import stop_process
 
 SYSTEM = "robot"
 P1_GOAL, P2_GOAL_MS, IDLE_GOAL, VANISH_GOAL = 1.25, 10.0, 1.0, 1.0
@@ -322,12 +322,7 @@ class _FloorProcess:
         try:
             self.process.wait(5.0)
         except subprocess.TimeoutExpired:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(3.0)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(3.0)
+            stop_process(self.process)
 
 
 def _node_values(model: Model, node: str, mode: str) -> dict[str, Any]:
@@ -383,12 +378,7 @@ def _idle_cpu(path: Path, seconds: float) -> float:
         time.sleep(seconds)
         return 100 * (_cpu_seconds(manager.pid) - before) / (time.perf_counter() - began)
     finally:
-        manager.send_signal(signal.SIGINT)
-        try:
-            manager.wait(3.0)
-        except subprocess.TimeoutExpired:
-            manager.kill()
-            manager.wait(3.0)
+        stop_process(manager)
 
 
 def run(quick: bool) -> list[Figure]:

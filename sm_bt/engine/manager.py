@@ -53,7 +53,7 @@ from sm_bt.engine.serialiser import Serialiser
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue
+from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue, resolve_mode
 
 __all__ = ["CLOSED", "REQUEST_TIMEOUT", "ModeManager", "Return"]
 
@@ -292,7 +292,7 @@ class ModeManager:
         default mode); :class:`RequestError` with the part's real names for one it does not have."""
         self._check_part(part)
         if wanted.state is State.ACTIVE:
-            resolved = self._resolve_mode(part, wanted.mode or DEFAULT_MODE)
+            resolved = resolve_mode(self.model.parts[part], wanted.mode or DEFAULT_MODE)
             if resolved is None:
                 modes = self.available_modes(part)
                 raise RequestError(f"{description}: unknown mode {wanted.mode!r} of {part}"
@@ -347,14 +347,6 @@ class ModeManager:
         self._check_part(node)
         if not isinstance(self.model.parts[node], NodePart):
             raise RequestError(f"{node} is a system, not a node (nodes: {', '.join(n.name for n in self.model.nodes)})")
-
-    def _resolve_mode(self, part: str, mode: str) -> str | None:
-        spec = self.model.parts[part]
-        if mode in spec.modes:
-            return mode
-        if mode == DEFAULT_MODE:
-            return spec.default_mode
-        return None
 
     @staticmethod
     def _resolve_transition(transition: Transition | str | int, current: State) -> Transition:

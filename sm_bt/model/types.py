@@ -225,6 +225,16 @@ class SystemPart:
 Part: TypeAlias = NodePart | SystemPart
 
 
+def resolve_mode(part: Part, mode: str) -> str | None:
+    """The mode of ``part`` that ``mode`` names: itself, or the default mode for ``__DEFAULT__``;
+    None if the part has no such mode."""
+    if mode in part.modes:
+        return mode
+    if mode == DEFAULT_MODE:
+        return part.default_mode
+    return None
+
+
 class Severity(str, enum.Enum):
     ERROR = "error"
     WARNING = "warning"

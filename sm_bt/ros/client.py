@@ -27,15 +27,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, transition_by_label
+from sm_bt.engine.lifecycle import REQUESTABLE, REQUESTABLE_LABELS, transition_by_label
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import Error
 from sm_bt.model.states import State
 from sm_bt.ros.environment import prepare, require_ros
 
 #: The state a lifecycle transition (by label) ends in when it succeeds.
-TRANSITION_GOALS = {"configure": "inactive", "activate": "active", "deactivate": "inactive",
-                    "cleanup": "unconfigured", "shutdown": "finalized"}
+TRANSITION_GOALS = {step.transition.label: step.goal.label for step in REQUESTABLE}
 #: Discovery time after which a manager that serves other parts, but not the one asked for, means
 #: a wrong name rather than a slow network.
 DISCOVERY_GRACE = 2.0

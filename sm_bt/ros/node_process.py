@@ -26,6 +26,19 @@ STOP_GRACE = 3.0  # SIGINT, then SIGKILL after this long
 KEPT_LINES = 400  # of each output stream, for error messages and tests
 
 
+def stop_process(process: subprocess.Popen[str], grace: float = STOP_GRACE) -> int | None:
+    """Stop a ROS process we started: SIGINT to its PID, wait up to ``grace`` s, then SIGKILL (Fast
+    DDS can hang on exit); its exit code (negative: killed). Nothing if it has ended already."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(grace)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait(5.0)
+    return process.returncode
+
+
 class NodesError(Error, RuntimeError):
     """The node process did not start or stopped (the message says how, with its stderr)."""
 
@@ -83,17 +96,7 @@ class NodesProcess:
     def stop(self, grace: float = STOP_GRACE) -> int | None:
         """SIGINT to its PID, wait up to ``grace`` s, then SIGKILL; the exit code (negative: killed).
         Idempotent."""
-        process = self.process
-        if process is None:
-            return None
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-            try:
-                process.wait(grace)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(5.0)
-        return process.returncode
+        return None if self.process is None else stop_process(self.process, grace)
 
     def kill(self) -> None:
         """SIGKILL now (a crash). Peers keep seeing its services for the DDS lease (about 20 s)."""
