@@ -1,6 +1,6 @@
 """P1, P2 and idle: the manager over real ROS 2 against raw rclpy calls, in the same run.
 
-One child process runs 20 rclpy lifecycle nodes (``python -m sm_bt.ros.sim_nodes``) of a model
+One child process runs 20 rclpy lifecycle nodes (``sm-bt sim-nodes``) of a model
 made here: one system ``robot`` of 20 nodes, 5 parameters each, two modes that differ in all of
 them. This process holds the embedded manager (``RosRuntime``, serving the system_modes interface)
 and a plain rclpy client in a process of its own: the floor. The floor's executors spin only while

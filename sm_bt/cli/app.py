@@ -1,7 +1,7 @@
 """``sm-bt``: the table of commands, the parser built from it, and :func:`main`.
 
 Each command lives in a module of its own in this package (``check``, ``modes``, ``demo``,
-``monitor``, ``view``, ``manager``) with an ``add_arguments(parser)`` and a ``run(args)`` that
+``monitor``, ``view``, ``manager``, ``sim_nodes``) with an ``add_arguments(parser)`` and a ``run(args)`` that
 returns the exit code; what commands share is in :mod:`sm_bt.cli.common` (the program's name,
 :class:`~sm_bt.cli.common.CliError`, loading a model by path or bundled name) and
 :mod:`sm_bt.cli.arguments` (argument types). To add a command, write its module and add a
@@ -17,7 +17,7 @@ import argparse
 import os
 import sys
 
-from sm_bt.cli import check, demo, manager, modes, monitor, remote, view
+from sm_bt.cli import check, demo, manager, modes, monitor, remote, sim_nodes, view
 from sm_bt.cli.common import PROG, CliError, Command, UsageError
 from sm_bt.model.types import DEFAULT_MODE
 
@@ -59,6 +59,12 @@ COMMANDS: list[Command] = [
                         "get_mode, get_available_modes for every part of MODEL, publish mode_event, "
                         "transition_event and the request topics (latched, as soon as inference changes), and "
                         "manage the nodes through their lifecycle and parameter services. Needs the ros extra."),
+    Command("sim-nodes", "run a model's nodes as simulated ROS 2 lifecycle nodes (stand-ins for a robot)",
+            sim_nodes.add_arguments, sim_nodes.run,
+            description="Run the model's nodes as simulated rclpy lifecycle nodes in this process, declaring each "
+                        "default mode's parameters. Prints 'READY /a,/b' once their services exist; SIGINT or "
+                        "SIGTERM stops it. Faults: the sim.* parameters (sim.transition_delay, sim.fail_next, "
+                        "sim.reject_parameters, sim.broken). Needs the ros extra."),
 ]
 
 

@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record", metavar="FILE.jsonl",
                         help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")
     parser.add_argument("--ros", action="store_true",
-                        help="run on real ROS 2 lifecycle nodes (python -m sm_bt.ros.sim_nodes pilot, started "
+                        help="run on real ROS 2 lifecycle nodes (sm-bt sim-nodes pilot, started "
                              "and stopped by the demo) with the manager on ROS 2, serving the system_modes "
                              "interface meanwhile; mode changes take real time, the world runs --speed "
                              "times faster; needs the ros extra")

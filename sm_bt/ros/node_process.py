@@ -1,4 +1,4 @@
-"""A child process running simulated nodes (``python -m sm_bt.ros.sim_nodes``), started and stopped safely.
+"""A child process running simulated nodes (``sm-bt sim-nodes``), started and stopped safely.
 
 Used by ``sm-bt demo --ros`` and by the tests. :meth:`NodesProcess.start` waits for the child's
 ``READY`` line; its output is read by threads (a full pipe would block the child). Stopping is
@@ -44,11 +44,11 @@ class NodesError(Error, RuntimeError):
 
 
 class NodesProcess:
-    """``python -m sm_bt.ros.sim_nodes MODEL ARGS...`` as a child process."""
+    """``sm-bt sim-nodes MODEL ARGS...`` (``python -m sm_bt.cli sim-nodes``) as a child process."""
 
     def __init__(self, model: str, *args: str, ready_timeout: float = READY_TIMEOUT,
                  env: dict[str, str] | None = None) -> None:
-        self.command = [sys.executable, "-m", "sm_bt.ros.sim_nodes", model, *args]
+        self.command = [sys.executable, "-m", "sm_bt.cli", "sim-nodes", model, *args]
         self.ready_timeout = ready_timeout
         #: Variables set for the child on top of this process's environment.
         self.env = dict(env or {})

@@ -21,16 +21,14 @@ with ``set_parameters`` and gets a confirmation:
     broken laser: deactivate, ``on_deactivate`` ERROR, errorprocessing, unconfigured. Activating it
     still succeeds (and it fails again shortly after).
 
-``python -m sm_bt.ros.sim_nodes MODEL`` runs a model's nodes in one process and prints
-``READY /a,/b`` once their services exist; SIGINT or SIGTERM stops it cleanly (exit 0).
+``sm-bt sim-nodes MODEL`` (:mod:`sm_bt.cli.sim_nodes`) runs a model's nodes in one process and
+prints ``READY /a,/b`` once their services exist; SIGINT or SIGTERM stops it cleanly (exit 0).
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import signal
-import sys
 import threading
 import time
 import traceback
@@ -49,13 +47,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
-from sm_bt.cli.arguments import non_negative
-from sm_bt.cli.common import CliError, load
-from sm_bt.model.errors import ModelError
+from sm_bt.model.errors import Error
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import environment
-
-PROG = "python -m sm_bt.ros.sim_nodes"
 
 PREFIX = "sim."
 TRANSITION_DELAY = "sim.transition_delay"
@@ -302,6 +296,10 @@ def select_nodes(model: Model, only: Collection[str] | None = None,
             [node for name, node in nodes.items() if name in plain])
 
 
+class RefusedName(Error, ValueError):
+    """A part or parameter name of the model that ROS refuses (rclpy's message)."""
+
+
 def print_ready(names: Sequence[str]) -> None:
     """The line a parent process waits for: ``READY /a,/b``."""
     print("READY " + ",".join(names), flush=True)
@@ -326,7 +324,8 @@ def run_nodes(
     rclcpp's component container, so that a node in a long transition holds up the others (by
     default each node has a thread). Without ``stop``, SIGINT and SIGTERM end the
     run (this needs the main thread). Shutdown order: executor, its thread, the nodes, the context.
-    ``ValueError`` for unknown names or states.
+    ``ValueError`` for unknown names or states; :class:`RefusedName` (a ``ValueError``) for a part
+    or parameter name that ROS refuses.
     """
     if initial_state not in INITIAL_STATES:
         raise ValueError(f"initial state must be one of {', '.join(INITIAL_STATES)}, not {initial_state!r}")
@@ -345,10 +344,13 @@ def run_nodes(
     spinner: threading.Thread | None = None
     failure: list[BaseException] = []
     try:
-        lifecycle = [SimulatedNode(part, context=context, transition_delay=transition_delay)
-                     for part in lifecycle_parts]
-        nodes.extend(lifecycle)
-        nodes.extend(SimulatedParameterNode(part, context=context) for part in plain_parts)
+        try:
+            lifecycle = [SimulatedNode(part, context=context, transition_delay=transition_delay)
+                         for part in lifecycle_parts]
+            nodes.extend(lifecycle)
+            nodes.extend(SimulatedParameterNode(part, context=context) for part in plain_parts)
+        except (NameValidationException, ParameterException) as error:
+            raise RefusedName(str(error)) from None
         for managed in lifecycle:
             managed.bring_to(initial_state)
         # One thread per node: each node's callbacks are mutually exclusive (its default group),
@@ -405,56 +407,3 @@ def _stop_on_signals(stop: threading.Event) -> Callable[[], None]:
             signal.signal(number, old)
 
     return restore
-
-
-def _names(text: str) -> list[str]:
-    return [name.strip() for name in text.split(",") if name.strip()]
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog=PROG,
-        description="Run a model's nodes as simulated ROS 2 lifecycle nodes in one process. Prints "
-                    "'READY /a,/b' once their services exist; SIGINT or SIGTERM stops it. Faults: "
-                    "the sim.* parameters (sim.transition_delay, sim.fail_next, sim.reject_parameters, "
-                    "sim.broken).",
-    )
-    parser.add_argument("model", help="model file, or a bundled model name (pilot, actuation)")
-    parser.add_argument("--only", type=_names, metavar="NAME,...", help="run only these nodes (default: all)")
-    parser.add_argument("--state", choices=INITIAL_STATES, default="unconfigured",
-                        help="bring the lifecycle nodes to this state before READY")
-    parser.add_argument("--parameters-only", type=_names, default=[], metavar="NAME,...",
-                        help="run these nodes as plain nodes: parameters, no lifecycle services")
-    parser.add_argument("--transition-delay", type=non_negative, default=0.0, metavar="SECONDS",
-                        help="seconds every transition takes (the nodes' first sim.transition_delay; default 0)")
-    parser.add_argument("--single-threaded", action="store_true",
-                        help="one executor thread for all the nodes, as in a component container: a node in a "
-                             "transition holds up the others (default: a thread per node)")
-    args = parser.parse_args(argv)
-    environment.prepare(local_only=False)  # stand-ins for a robot's nodes: the user's discovery settings
-    try:
-        model = load(args.model)
-    except ModelError as error:
-        print(f"{PROG}: error: {args.model}: invalid model: {'; '.join(map(str, error.issues))}", file=sys.stderr)
-        return 2
-    except CliError as error:
-        print(f"{PROG}: error: {error}", file=sys.stderr)
-        return 2
-    try:
-        select_nodes(model, args.only, args.parameters_only)
-    except ValueError as error:
-        print(f"{PROG}: error: {error}", file=sys.stderr)
-        return 2
-    try:
-        run_nodes(model, args.only, initial_state=args.state, parameters_only=args.parameters_only,
-                  transition_delay=args.transition_delay, single_threaded=args.single_threaded)
-    except (NameValidationException, ParameterException) as error:  # a part or parameter name ROS refuses
-        print(f"{PROG}: error: {args.model}: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:  # a signal before our handlers were installed
-        return 130
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,5 +1,5 @@
 """``sm-bt demo --ros`` and ``sm-bt monitor --ros``: the pilot mission and the monitor on real rclpy
-lifecycle nodes in another process (``python -m sm_bt.ros.sim_nodes``).
+lifecycle nodes in another process (``sm-bt sim-nodes``).
 
 The demo starts and stops its node process itself; the monitor watches a process started by the
 ``node_processes`` fixture (tests/support/ros_processes.py, a plugin of conftest). Both inherit the session's

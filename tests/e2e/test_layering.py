@@ -52,6 +52,12 @@ def test_behaviours_and_trees_sit_above_the_engine() -> None:
     assert not {m for m in behaviours if m.startswith(("sm_bt.trees", "sm_bt.demo", "sm_bt.cli"))}
 
 
+def test_the_ros_adapters_import_no_command_line() -> None:
+    """Executables sit at the top: the CLI starts the ROS adapters, never the other way round."""
+    ros = imported_modules(ROOT / "sm_bt" / "ros")
+    assert not {m for m in ros if m.startswith("sm_bt.cli")}
+
+
 def imported_modules_of(path: Path) -> set[str]:
     found: set[str] = set()
     for node in ast.walk(ast.parse(path.read_text(), str(path))):

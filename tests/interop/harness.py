@@ -3,7 +3,7 @@
 
     SM_BT_REFERENCE=<prefix of tools/reference/build.sh> python tests/interop/harness.py [--out DIR] [--only NAME]
 
-For every scenario and manager: the model's nodes start (``python -m sm_bt.ros.sim_nodes``), then the
+For every scenario and manager: the model's nodes start (``sm-bt sim-nodes``), then the
 manager, then ``tests/interop/client.py`` (rclpy only) runs the scenario's steps in a process of
 its own; everything is stopped by PID (SIGINT, then SIGKILL) and each run has a ROS domain of its
 own. What the client saw goes to ``DIR/results.json``; ``DIR/report.md`` has a table per scenario

@@ -1,6 +1,6 @@
 """The ROS 2 backend and the mode manager node against real rclpy lifecycle nodes in other processes.
 
-Node processes run ``python -m sm_bt.ros.sim_nodes`` (several nodes per process); the manager runs
+Node processes run ``sm-bt sim-nodes`` (several nodes per process); the manager runs
 embedded in the test process (``RosRuntime``) or as ``sm-bt manager`` in its own process; plain
 rclpy clients play the part of existing system_modes users.
 """

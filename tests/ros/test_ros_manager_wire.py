@@ -1,7 +1,7 @@
 """``sm-bt manager`` on the wire, as a plain rclpy client of the reference's interface sees it.
 
 The manager runs in its own process (``python -m sm_bt.cli manager pilot``), the pilot's nodes in
-another (``python -m sm_bt.ros.sim_nodes``); the client side uses only rclpy, lifecycle_msgs and
+another (``sm-bt sim-nodes``); the client side uses only rclpy, lifecycle_msgs and
 system_modes_msgs. What is checked (issue 10, items 6 to 9): an empty mode name is refused and
 changes nothing; ``mode_event`` carries one message per change of the actual mode with its real
 start; ``transition_request_info`` carries the requested transition and the state it starts

@@ -1,4 +1,4 @@
-"""The simulated nodes as real ROS 2 processes (``python -m sm_bt.ros.sim_nodes``), driven over ROS.
+"""The simulated nodes as real ROS 2 processes (``sm-bt sim-nodes``), driven over ROS.
 
 Each test starts its own process (a few nodes each) and talks to it with plain rclpy clients from a
 fresh context, as the ROS backend will: lifecycle services, parameter services, transition events.
@@ -298,7 +298,7 @@ def test_sigint_ends_the_process_quickly_with_exit_code_0(node_processes: Starte
     (["no_such_model"], "no bundled model of that name"),
 ])
 def test_bad_arguments_exit_2_with_one_line(args: list[str], message: str) -> None:
-    result = subprocess.run([sys.executable, "-m", "sm_bt.ros.sim_nodes", *args],
+    result = subprocess.run([sys.executable, "-m", "sm_bt.cli", "sim-nodes", *args],
                             capture_output=True, text=True, timeout=20)
     assert result.returncode == 2
     assert message in result.stderr

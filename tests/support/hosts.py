@@ -516,7 +516,7 @@ class Hosts:
         return ["ip", "netns", "exec", self.namespaces[where], "env", *unset, *assigned, *argv]
 
     def nodes(self, model: str, *args: str, ready_timeout: float = READY_TIMEOUT) -> NodeProcess:
-        """``python -m sm_bt.ros.sim_nodes MODEL ARGS`` on the robot side, READY already seen."""
+        """``sm-bt sim-nodes MODEL ARGS`` on the robot side, READY already seen."""
         process = HostNodeProcess(self, model, *args, ready_timeout=ready_timeout)
         process.start()
         self._check_exec(process)

@@ -1,4 +1,4 @@
-"""Helpers for tests that run ROS 2 node processes (``python -m sm_bt.ros.sim_nodes``) and talk to them.
+"""Helpers for tests that run ROS 2 node processes (``sm-bt sim-nodes``) and talk to them.
 
 The test session has prepared the environment (conftest: local discovery, a domain id of its own),
 and the processes inherit it. Rules these helpers enforce, because each hazard was seen here:
