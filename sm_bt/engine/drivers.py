@@ -63,7 +63,7 @@ class DriverIO(Protocol):
 
 
 @dataclass(slots=True, eq=False)
-class _Call:
+class _DriverCall:
     """A call of a driver's in flight; its bound :meth:`answered` is the backend's ``done`` (one
     object per call: every node of a bring-up has one in flight at once)."""
 
@@ -101,7 +101,7 @@ class NodeDriver:
         self.node = node
         self.io = io
         self.owner: Owner | None = None
-        self.call: _Call | None = None
+        self.call: _DriverCall | None = None
         # After a transition answered with success before the node reported its goal state: that
         # goal, until it is reported. The answer and the reports may come in either order, and
         # reports of an earlier transition (one the node made by itself) may still be on their
@@ -242,17 +242,17 @@ class NodeDriver:
 
     def _send_parameters(self, owner: Owner, mode: NodeMode) -> None:
         values = mode.values()
-        call = _Call(self, f"set parameters of mode {mode.name}", self.io.now(), owner, mode=mode.name)
+        call = _DriverCall(self, f"set parameters of mode {mode.name}", self.io.now(), owner, mode=mode.name)
         self.call = call
         self._sets += 1
         self.io.send_parameters(self.node, values, call.answered)
 
     def _send_transition(self, owner: Owner, step: Step, more: str) -> None:
-        call = _Call(self, step.transition.label + more, self.io.now(), owner, step.transition, step.goal)
+        call = _DriverCall(self, step.transition.label + more, self.io.now(), owner, step.transition, step.goal)
         self.call = call
         self.io.send_transition(self.node, step.transition, call.answered)
 
-    def _call_answered(self, call: _Call, result: CallResult) -> None:
+    def _call_answered(self, call: _DriverCall, result: CallResult) -> None:
         if self.call is not call:
             return  # superseded: what it did is reported by the node
         self.call = None
@@ -262,7 +262,7 @@ class NodeDriver:
             self._awaiting = call.goal
         self._answered(call, result)
 
-    def _answered(self, call: _Call, result: CallResult) -> None:
+    def _answered(self, call: _DriverCall, result: CallResult) -> None:
         owner = self.owner
         if result.refused and owner is not None and self._refusals < _MAX_REFUSALS:
             # Planned from a report that was out of date: plan again from the next one.

@@ -59,7 +59,7 @@ class NodeStatus(str, enum.Enum):
     VANISHED = "vanished"
 
 
-class EventKind(str, enum.Enum):
+class SimEventKind(str, enum.Enum):
     REQUEST = "request"  # a change_state / set_parameters call arrived at the backend
     RESPONSE = "response"  # its done() was called
     TRANSITION = "transition"  # a lifecycle TransitionEvent of the node
@@ -75,7 +75,7 @@ class SimEvent:
 
     time: float
     node: str
-    kind: EventKind
+    kind: SimEventKind
     details: str
     transition: TransitionEvent | None = None
     parameters: Mapping[str, ParamValue] | None = None
@@ -85,7 +85,7 @@ class SimEvent:
 
 
 @dataclass(eq=False)  # identity: two equal-looking calls are still two calls
-class _Call:
+class _PendingCall:
     node: str
     label: str
     done: Done
@@ -113,7 +113,7 @@ class _Callbacks:
     __slots__ = ("backend", "call", "node", "on_error", "outcome", "sim", "transition")
 
     def __init__(self, backend: SimBackend, node: str, transition: Transition, outcome: Outcome, on_error: Outcome,
-                 call: _Call | None) -> None:
+                 call: _PendingCall | None) -> None:
         self.backend = backend
         self.node = node
         self.sim = backend._nodes[node]  # this process of the node (a restart cancels its timers)
@@ -231,7 +231,7 @@ class SimBackend:
 
         self._nodes: dict[str, SimNode] = {}
         self._status: dict[str, NodeStatus] = {}
-        self._pending: dict[str, list[_Call]] = {name: [] for name in names}
+        self._pending: dict[str, list[_PendingCall]] = {name: [] for name in names}
         self._timers: dict[str, set[TimerHandle]] = {name: set() for name in names}
         self._delays: dict[tuple[str, Transition | None], float] = {}
         self._failures: dict[tuple[str, Transition], _Failure] = {}
@@ -301,15 +301,15 @@ class SimBackend:
         self._visible = set()
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
-        call = _Call(node, transition.label, done)
-        self._record(node, EventKind.REQUEST, f"change_state {transition.label} ({int(transition)})")
+        call = _PendingCall(node, transition.label, done)
+        self._record(node, SimEventKind.REQUEST, f"change_state {transition.label} ({int(transition)})")
         if self._accept(call):
             self._after(node, 0.0, functools.partial(self._deliver_transition, call, transition))
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         values = dict(parameters)
-        call = _Call(node, "set_parameters", done)
-        self._record(node, EventKind.REQUEST, f"set_parameters {_format(values)}", parameters=values)
+        call = _PendingCall(node, "set_parameters", done)
+        self._record(node, SimEventKind.REQUEST, f"set_parameters {_format(values)}", parameters=values)
         if self._accept(call):
             self._after(node, self.parameter_delay, lambda: self._deliver_parameters(call, values))
 
@@ -334,7 +334,7 @@ class SimBackend:
         if outcome is Outcome.SUCCESS:
             raise ValueError("fail_next needs Outcome.FAILURE or Outcome.ERROR")
         self._failures[(node, transition)] = _Failure(outcome, on_error)
-        self._record(node, EventKind.FAULT, f"armed: next on_{transition.label} returns {outcome.name}")
+        self._record(node, SimEventKind.FAULT, f"armed: next on_{transition.label} returns {outcome.name}")
 
     def hang_next(self, node: str, transition: Transition) -> None:
         """The next requested ``transition`` of ``node`` enters its transition state and never leaves it:
@@ -342,7 +342,7 @@ class SimBackend:
         self._require_lifecycle(node, "hang a transition of")
         self._require_requestable(transition)
         self._hangs.add((node, transition))
-        self._record(node, EventKind.FAULT, f"armed: next {transition.label} hangs")
+        self._record(node, SimEventKind.FAULT, f"armed: next {transition.label} hangs")
 
     def reject_parameters(self, node: str, reason: str | None) -> None:
         """While set, every ``set_parameters`` on ``node`` fails with ``reason`` and changes nothing;
@@ -350,10 +350,10 @@ class SimBackend:
         self._require(node)
         if reason is None:
             self._parameter_rejections.pop(node, None)
-            self._record(node, EventKind.FAULT, "cleared: parameter sets accepted again")
+            self._record(node, SimEventKind.FAULT, "cleared: parameter sets accepted again")
         else:
             self._parameter_rejections[node] = reason
-            self._record(node, EventKind.FAULT, f"armed: parameter sets rejected ({reason})")
+            self._record(node, SimEventKind.FAULT, f"armed: parameter sets rejected ({reason})")
 
     def set_parameter(self, node: str, name: str, value: ParamValue) -> None:
         """Parameter ``name`` of the running ``node`` changes from outside (another client, the node
@@ -363,7 +363,7 @@ class SimBackend:
             self._nodes[node].set_parameters({name: value})
         except ParameterRejected as error:
             raise ValueError(f"node {node}: {error}") from None
-        self._record(node, EventKind.FAULT, f"parameter {name} changed from outside")
+        self._record(node, SimEventKind.FAULT, f"parameter {name} changed from outside")
         self._parameters_changed(node, {name: value})
 
     def trigger(self, node: str, transition: Transition, outcome: Outcome = Outcome.SUCCESS,
@@ -380,7 +380,7 @@ class SimBackend:
             event = self._nodes[node].start(transition)
         except TransitionRefused as error:
             raise ValueError(f"node {node} cannot {transition.label} by itself: {error}") from None
-        self._record(node, EventKind.FAULT, f"{transition.label} by itself, on_{transition.label} will "
+        self._record(node, SimEventKind.FAULT, f"{transition.label} by itself, on_{transition.label} will "
                                             f"return {outcome.name}")
         self._moved(node, event)
         _Callbacks(self, node, transition, outcome, on_error, None).start()
@@ -392,7 +392,7 @@ class SimBackend:
         self._cancel_timers(node)
         self._hung.discard(node)
         self._status[node] = NodeStatus.CRASHED
-        self._record(node, EventKind.FAULT, "crashed: no more answers")
+        self._record(node, SimEventKind.FAULT, "crashed: no more answers")
         self._after(node, self.vanish_after, lambda: self._vanish(node))
 
     def vanish(self, node: str) -> None:
@@ -423,7 +423,7 @@ class SimBackend:
         if unnoticed and node in self._visible:
             self._nodes[node] = self._spawn(node, start)
             self._status[node] = NodeStatus.RUNNING
-            self._record(node, EventKind.STARTED, f"restarted in {start}, unnoticed")
+            self._record(node, SimEventKind.STARTED, f"restarted in {start}, unnoticed")
             self._report(lambda listener: listener.node_state(node, start))
         else:
             self._start(node, start, f"restarted in {start}")
@@ -442,7 +442,7 @@ class SimBackend:
                 self._hangs.discard(key)
             if armed or name in self._parameter_rejections:
                 self._parameter_rejections.pop(name, None)
-                self._record(name, EventKind.FAULT, "cleared: armed faults disarmed")
+                self._record(name, SimEventKind.FAULT, "cleared: armed faults disarmed")
 
     def start_late(self, node: str, at: float) -> None:
         """``node`` is not running until virtual time ``at``; then it starts in its initial state and
@@ -452,7 +452,7 @@ class SimBackend:
             raise ValueError(f"node {node} was already reported running; use crash() and restart()")
         stale = self._stop(node)
         self._status[node] = NodeStatus.NOT_STARTED
-        self._record(node, EventKind.FAULT, f"not running until t={at:g}")
+        self._record(node, SimEventKind.FAULT, f"not running until t={at:g}")
         self._fail(stale, f"node {node} is not running")
         self._after(node, at - self._clock.now(),
                     lambda: self._start(node, self._initial_state[node], f"started late in "
@@ -460,7 +460,7 @@ class SimBackend:
 
     # -- request handling ---------------------------------------------------------------------------
 
-    def _accept(self, call: _Call) -> bool:
+    def _accept(self, call: _PendingCall) -> bool:
         """Queue a call on a running node (True); a crashed node keeps it unanswered until it vanishes;
         anything else fails, through the clock."""
         status = self._status.get(call.node)
@@ -471,7 +471,7 @@ class SimBackend:
         self._clock.call_later(0.0, lambda: self._respond(call, result))
         return False
 
-    def _deliver_transition(self, call: _Call, transition: Transition) -> None:
+    def _deliver_transition(self, call: _PendingCall, transition: Transition) -> None:
         node = call.node
         if node in self._plain:
             # The ROS backend's wording (sm_bt.ros.backend), so that both backends read the same.
@@ -487,14 +487,14 @@ class SimBackend:
         if (node, transition) in self._hangs:
             self._hangs.discard((node, transition))
             self._hung.add(node)
-            self._record(node, EventKind.FAULT, f"{transition.label} hangs in {event.goal}: no response")
+            self._record(node, SimEventKind.FAULT, f"{transition.label} hangs in {event.goal}: no response")
             return
         failure = self._failures.pop((node, transition), _SUCCEEDS)
         if failure.outcome is not Outcome.SUCCESS:
-            self._record(node, EventKind.FAULT, f"on_{transition.label} will return {failure.outcome.name}")
+            self._record(node, SimEventKind.FAULT, f"on_{transition.label} will return {failure.outcome.name}")
         _Callbacks(self, node, transition, failure.outcome, failure.on_error, call).start()
 
-    def _deliver_parameters(self, call: _Call, values: dict[str, ParamValue]) -> None:
+    def _deliver_parameters(self, call: _PendingCall, values: dict[str, ParamValue]) -> None:
         node = call.node
         rejection = self._parameter_rejections.get(node)
         if rejection is not None:
@@ -508,7 +508,7 @@ class SimBackend:
         self._parameters_changed(node, values)
         self._respond(call, CallResult(True))
 
-    def _respond(self, call: _Call, result: CallResult) -> None:
+    def _respond(self, call: _PendingCall, result: CallResult) -> None:
         if call.answered:
             return
         call.answered = True
@@ -516,7 +516,7 @@ class SimBackend:
         if call in pending:
             pending.remove(call)
         outcome = "ok" if result.ok else f"failed: {result.reason}"
-        self._record(call.node, EventKind.RESPONSE, f"{call.label}: {outcome}")
+        self._record(call.node, SimEventKind.RESPONSE, f"{call.label}: {outcome}")
         call.done(result)
 
     # -- process life -------------------------------------------------------------------------------
@@ -533,11 +533,11 @@ class SimBackend:
     def _start(self, node: str, state: State, details: str) -> None:
         self._nodes[node] = self._spawn(node, state)
         self._status[node] = NodeStatus.RUNNING
-        self._record(node, EventKind.STARTED, details)
+        self._record(node, SimEventKind.STARTED, details)
         if node in self._watched:
             self._appear(node)
 
-    def _stop(self, node: str) -> list[_Call]:
+    def _stop(self, node: str) -> list[_PendingCall]:
         """End the current process without a vanish report; return its unanswered calls, for the
         caller to fail once the node's new status is in place (a caller's ``done`` may call again
         at once, and that call must reach the new process, not the old one)."""
@@ -546,14 +546,14 @@ class SimBackend:
         stale, self._pending[node] = self._pending[node], []
         return stale
 
-    def _fail(self, calls: list[_Call], reason: str) -> None:
+    def _fail(self, calls: list[_PendingCall], reason: str) -> None:
         for call in calls:
             self._respond(call, CallResult(False, reason))
 
     def _vanish(self, node: str, why: str | None = None) -> None:
         self._status[node] = NodeStatus.VANISHED
         reason = why if why is not None else f"no answer for {float(self.vanish_after)} s (crashed?)"
-        self._record(node, EventKind.VANISHED, reason)
+        self._record(node, SimEventKind.VANISHED, reason)
         if node in self._visible and self._listener is not None:
             self._visible.discard(node)
             self._report(lambda listener: listener.node_vanished(node, reason))
@@ -574,12 +574,12 @@ class SimBackend:
         self._report(lambda listener: listener.node_appeared(node, report))
 
     def _moved(self, node: str, event: TransitionEvent) -> None:
-        self._record(node, EventKind.TRANSITION, str(event), transition=event)
+        self._record(node, SimEventKind.TRANSITION, str(event), transition=event)
         if node in self._visible and self._listener is not None:
             self._report(lambda listener: listener.node_state(node, event.goal))
 
     def _parameters_changed(self, node: str, values: Mapping[str, ParamValue]) -> None:
-        self._record(node, EventKind.PARAMETERS, _format(values), parameters=dict(values))
+        self._record(node, SimEventKind.PARAMETERS, _format(values), parameters=dict(values))
         if values and node in self._visible and self._listener is not None:
             changed = dict(values)
             self._report(lambda listener: listener.node_parameters(node, changed))
@@ -600,7 +600,7 @@ class SimBackend:
 
         self._clock.call_later(self.report_delay, later)
 
-    def _record(self, node: str, kind: EventKind, details: str, *, transition: TransitionEvent | None = None,
+    def _record(self, node: str, kind: SimEventKind, details: str, *, transition: TransitionEvent | None = None,
                 parameters: Mapping[str, ParamValue] | None = None) -> None:
         if self._history:
             self.events.append(SimEvent(self._clock.now(), node, kind, details, transition, parameters))

@@ -31,7 +31,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model, NodePart, ParamValue
-from sm_bt.sim import EventKind, NotReached, SimulatedSystem
+from sm_bt.sim import NotReached, SimEventKind, SimulatedSystem
 
 TRANSITIONS = ("configure", "activate", "deactivate", "cleanup")
 #: Node-level requests mixed in with the systems' (a mode other than the default where there is one).
@@ -142,7 +142,7 @@ def run_pair(name: str, settled: bool, offset: str, r1: RequestAction, r2: Reque
     elif offset == "mid-transition":
         # Half way through the first transition r1 starts (or a tick later when it starts none).
         seen = len(backend.events)
-        run_until(system, lambda: any(e.kind is EventKind.TRANSITION for e in backend.events[seen:]), 1.0)
+        run_until(system, lambda: any(e.kind is SimEventKind.TRANSITION for e in backend.events[seen:]), 1.0)
         backend.clock.advance(TRANSITION_DELAY / 2)
     elif offset == "after settling":
         run_until(system, lambda: first.done and not manager.requests())

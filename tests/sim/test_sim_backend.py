@@ -14,7 +14,7 @@ from sm_bt.engine.clock import VirtualClock
 from sm_bt.engine.lifecycle import OUTCOMES, REQUESTABLE, Outcome, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, ParamValue
-from sm_bt.sim import EventKind, SimBackend
+from sm_bt.sim import SimBackend, SimEventKind
 
 S = State
 T = Transition
@@ -33,7 +33,7 @@ def attached(**options: Any) -> tuple[SimBackend, Recorder]:
 
 def transition_ids(backend: SimBackend, node: str) -> list[int]:
     return [int(e.transition.transition) for e in backend.events
-            if e.node == node and e.kind is EventKind.TRANSITION and e.transition is not None]
+            if e.node == node and e.kind is SimEventKind.TRANSITION and e.transition is not None]
 
 
 # -- construction and attach -----------------------------------------------------------------------
@@ -249,7 +249,7 @@ def test_set_parameters_applies_after_the_delay() -> None:
     assert recorder.reports == [("parameters", "amcl", {"alpha1": 0.05, "transform_tolerance": 2.5})]
     assert results == [CallResult(True)]
     assert backend.node("amcl").parameters == {"transform_tolerance": 2.5, "alpha1": 0.05, "beams": 60}
-    [event] = [e for e in backend.events if e.kind is EventKind.PARAMETERS]
+    [event] = [e for e in backend.events if e.kind is SimEventKind.PARAMETERS]
     assert event.parameters == {"alpha1": 0.05, "transform_tolerance": 2.5}
 
 
@@ -349,8 +349,8 @@ def test_events_read_as_a_narrative() -> None:
     backend.change_state("amcl", T.CONFIGURE, lambda _: None)
     backend.clock.advance(1.0)
     lines = [str(e) for e in backend.events if e.node == "amcl"]
-    assert [e.kind for e in backend.events] == [EventKind.REQUEST, EventKind.TRANSITION,
-                                                EventKind.TRANSITION, EventKind.RESPONSE]
+    assert [e.kind for e in backend.events] == [SimEventKind.REQUEST, SimEventKind.TRANSITION,
+                                                SimEventKind.TRANSITION, SimEventKind.RESPONSE]
     assert lines[0].split() == ["0.000", "amcl", "request", "change_state", "configure", "(1)"]
     assert lines[2].endswith("on_configure_success (10): configuring -> inactive")
     assert lines[3].endswith("configure: ok")
@@ -469,7 +469,7 @@ def test_clear_faults_disarms_what_was_not_used() -> None:
     backend.set_parameters("amcl", {"alpha1": 0.1}, results.append)
     backend.clock.advance(1.0)
     assert results == [CallResult(True)] * 3
-    assert [e.details for e in backend.events if e.kind is EventKind.FAULT][-2:] == [
+    assert [e.details for e in backend.events if e.kind is SimEventKind.FAULT][-2:] == [
         "cleared: armed faults disarmed", "cleared: armed faults disarmed"]
 
 

@@ -12,7 +12,7 @@ from sm_bt.engine.backend import CallResult, NodeReport
 from sm_bt.engine.lifecycle import Outcome, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, ParamValue
-from sm_bt.sim import EventKind, NodeStatus, SimBackend
+from sm_bt.sim import NodeStatus, SimBackend, SimEventKind
 
 S = State
 T = Transition
@@ -30,7 +30,7 @@ def attached(**options: Any) -> tuple[SimBackend, Recorder]:
 
 
 def faults(backend: SimBackend, node: str) -> list[str]:
-    return [e.details for e in backend.events if e.node == node and e.kind is EventKind.FAULT]
+    return [e.details for e in backend.events if e.node == node and e.kind is SimEventKind.FAULT]
 
 
 # -- fail_next -------------------------------------------------------------------------------------
@@ -190,7 +190,7 @@ def test_laser_resender_fails_by_itself() -> None:
     backend.clock.advance(0.05)
     assert recorder.about("laser_resender") == [
         ("state", S.DEACTIVATING), ("state", S.ERRORPROCESSING), ("state", S.UNCONFIGURED)]
-    events = [e.transition for e in backend.events if e.kind is EventKind.TRANSITION]
+    events = [e.transition for e in backend.events if e.kind is SimEventKind.TRANSITION]
     assert [(int(e.transition), int(e.start), int(e.goal)) for e in events if e is not None] == [
         (4, 3, 14), (42, 14, 15), (60, 15, 1)]
 
@@ -251,7 +251,8 @@ def test_crash_stops_answers_then_vanishes_and_fails_pending_calls() -> None:
     backend.clock.run_pending()
     assert later == [CallResult(False, "node amcl is not running")]
     assert [e.kind for e in backend.events if e.node == "amcl"][-5:] == [
-        EventKind.VANISHED, EventKind.RESPONSE, EventKind.RESPONSE, EventKind.REQUEST, EventKind.RESPONSE]
+        SimEventKind.VANISHED, SimEventKind.RESPONSE, SimEventKind.RESPONSE, SimEventKind.REQUEST,
+        SimEventKind.RESPONSE]
 
 
 def test_default_vanish_reason_and_only_running_nodes_crash() -> None:
@@ -379,7 +380,7 @@ def test_start_late_method_and_its_limits() -> None:
     with pytest.raises(ValueError, match="already reported running"):
         backend.start_late("amcl", 5.0)
     assert faults(backend, "amcl") == ["not running until t=3"]
-    assert [e.details for e in backend.events if e.kind is EventKind.STARTED] == ["started late in inactive"]
+    assert [e.details for e in backend.events if e.kind is SimEventKind.STARTED] == ["started late in inactive"]
 
 
 def test_late_node_started_early_by_restart() -> None:

@@ -9,8 +9,7 @@ from typing import Any
 import py_trees
 from py_trees.common import Status
 
-from sm_bt.sim import SimulatedSystem
-from sm_bt.sim.backend import EventKind as SimEventKind
+from sm_bt.sim import SimEventKind, SimulatedSystem
 
 
 def fresh_blackboard() -> Iterator[None]:
