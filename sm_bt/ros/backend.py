@@ -31,10 +31,9 @@ What the reference manager does not do, and this backend does:
 Threads: rclpy calls back in its executor thread, timers run in the :class:`WallClock` thread.
 Every report and ``done`` goes to the listener through one queue, so they reach the manager one at
 a time, in order, and never from inside a call: what an answer or event makes is run by the
-executor thread that heard it once its callback is done (a hop to another thread costs a wake-up,
-up to a millisecond on a busy machine, on every change); what a call or timer makes, by the clock
-(delay 0). The rclpy node must be spun by an
-executor (see :mod:`sm_bt.ros.runtime`); the backend never spins it itself.
+executor thread that heard it once its callback is done (a hop to another thread would cost a
+wake-up on every change); what a call or timer makes, by the clock (delay 0). The rclpy node must
+be spun by an executor (see :mod:`sm_bt.ros.runtime`); the backend never spins it itself.
 """
 
 from __future__ import annotations

@@ -47,8 +47,8 @@ def typed_items(values: Mapping[str, ParamValue]) -> TypedItems:
 @functools.lru_cache(maxsize=4096)
 def set_parameters_request(items: TypedItems) -> Any:
     """The request that sets these values: one per node mode, as a mode's values are set again and
-    again (building the messages of five values takes about 40 µs, in the thread that makes the
-    calls); like the transitions' requests, it is serialised when sent and never changed."""
+    again (building the messages costs the thread that makes the calls); like the transitions'
+    requests, it is serialised when sent and never changed."""
     return SetParametersAtomically.Request(parameters=to_parameters({name: value for name, value, _ in items}))
 
 

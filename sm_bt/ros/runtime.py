@@ -20,18 +20,14 @@ nodes join its context (still one participant per process), and ``close()`` remo
 runtime added. Either side may shut down first: ``close()`` after the node was destroyed or the
 context shut down has nothing left to remove and does not raise.
 Apart, each executor wakes over its own entities only: rclpy's executor rebuilds its wait set
-over every entity of its nodes for every message it handles (with 20 managed nodes, 1.9 ms for
-all of them together, 0.8 ms for the backend's), and the backend handles one per answer and
-event. The backend's node, where almost all of the traffic is, and the watching node (80
-clients for 20 nodes, woken by every liveness probe) are spun by rclpy's ``EventsExecutor``
-where the installed rclpy has it (``events_executor=False``: the plain one): it dispatches from
-the middleware's own notifications, without a wait set, and the manager's process then spends
-less CPU on a change (with 20 nodes, 3.1 instead of 6.4 ms per request in the backend's thread)
-and when idle (0.65 instead of 0.85 % of a core). Each wait lasts up to ``EVENTS_WAIT`` s and
-serves every event that comes meanwhile, back to back: a wait per event (``spin_once``) costs
-about 0.1 ms of setting up and a round trip through the interpreter's lock, and a burst of
-answers then queued behind itself (a system's ``mode_event`` up to 19 ms after the last node's
-event, against at most 8 ms).
+over every entity of its nodes for every message it handles, and the backend handles one per
+answer and event. The backend's node, where almost all of the traffic is, and the watching node
+(woken by every liveness probe) are spun by rclpy's ``EventsExecutor`` where the installed rclpy
+has it (``events_executor=False``: the plain one): it dispatches from the middleware's own
+notifications, without a wait set, which costs the manager's process less CPU on a change and
+when idle. Each wait lasts up to ``EVENTS_WAIT`` s and serves every event that comes meanwhile,
+back to back: a wait per event put a burst of answers behind itself. The measurements are in
+README.md, "Performance".
 ``close()`` stops in the order rclpy needs: the interface's executor, then the interface,
 the manager and backend, the other executors, the nodes and context.
 """
@@ -83,8 +79,8 @@ class RosRuntime:
     ``switch_interval``: if given, the interpreter's GIL switch interval (``sys.setswitchinterval``)
     while the runtime runs, put back by :meth:`close`; by default (``None``) the interpreter's own.
     Answers and events are handled in the executor thread that heard them, so a shorter interval
-    buys no latency here and costs CPU in handing the lock over (0.5 ms against Python's 5 ms: a
-    20-node bring-up 5-10 % slower, the system events' delays no shorter). ``events_executor``: spin
+    buys no latency here and costs CPU in handing the lock over (README.md, "Performance").
+    ``events_executor``: spin
     the backend's and the watching node with rclpy's ``EventsExecutor`` where there is one (see the
     module's doc).
     """
