@@ -65,9 +65,8 @@ class PartStatus:
 
 
 def part_status(manager: ModeManager, part: str) -> PartStatus:
-    actual = manager.actual(part)
-    target = manager.target(part)
-    divergence = manager.divergence(part)
+    status = manager.status(part)
+    actual, target, divergence = status.actual, status.target, status.divergence
     return PartStatus(
         part=part,
         state=actual.state.label,

@@ -25,7 +25,6 @@ from rich.text import Text
 
 from sm_bt.engine.events import Cause, Event, EventKind
 from sm_bt.engine.manager import ModeManager
-from sm_bt.model.types import NodePart
 
 INFERRED = "(*)"
 #: Row styles: divergences that rules/recovery (or a human) must deal with, and ones that are settling.
@@ -75,15 +74,11 @@ class Row:
 def snapshot(manager: ModeManager) -> list[Row]:
     """One row per part: systems, then nodes, each sorted by name."""
     rows: list[Row] = []
-    model = manager.model
-    ordered = sorted(model.parts.values(), key=lambda p: (isinstance(p, NodePart), p.name))
-    for part in ordered:
-        actual = manager.actual(part.name)
-        target = manager.target(part.name)
-        divergence = manager.divergence(part.name)
+    for status in sorted(manager.snapshot(), key=lambda s: (s.is_node, s.part)):
+        actual, target, divergence = status.actual, status.target, status.divergence
         rows.append(Row(
-            part=part.name,
-            kind=part.kind.value,
+            part=status.part,
+            kind=status.kind.value,
             target_state=target.state.label if target else "",
             target_mode=(target.mode or "") if target else "",
             raw_state=actual.state.label,

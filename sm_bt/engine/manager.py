@@ -50,6 +50,7 @@ from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.responses import Responses
 from sm_bt.engine.serialiser import Serialiser
+from sm_bt.engine.snapshots import PartSnapshot
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
@@ -191,6 +192,27 @@ class ModeManager:
         with self._lock:
             self._check_node(node)
             return self._inference.observation(node)
+
+    def status(self, part: str) -> PartSnapshot:
+        """``part`` as the manager knows it now, read at once (:mod:`sm_bt.engine.snapshots`)."""
+        with self._lock:
+            self._check_part(part)
+            return self._status(part)
+
+    def snapshot(self) -> list[PartSnapshot]:
+        """Every part, in the model's order, read at one moment."""
+        with self._lock:
+            return [self._status(part) for part in self.model.parts]
+
+    def _status(self, part: str) -> PartSnapshot:
+        spec = self.model.parts[part]
+        node = isinstance(spec, NodePart)
+        observation = self._inference.observation(part) if node else None
+        return PartSnapshot(part, spec.kind, self._inference.actual(part), self._inference.target(part),
+                            self._divergences.records.get(part), part in self._reactions.gave_up,
+                            observation.reachable if observation is not None else None,
+                            observation.gone if observation is not None else "",
+                            self._reports.returns.get(part) if node else None)
 
     def last_return(self, node: str) -> Return | None:
         """How ``node`` came back the last time it had vanished (``None``: it never did)."""

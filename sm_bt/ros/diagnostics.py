@@ -76,11 +76,8 @@ def request_outcome(request: Request | None) -> str:
 def part_status(manager: ModeManager, part: str, last: Request | None, link: Any = None) -> PartStatus:
     """The status of ``part`` now (call with the manager's lock held); ``last``: its last request,
     ``link``: for a node, how it answers (:class:`sm_bt.ros.backend.Link`), if known."""
-    actual = manager.actual(part)
-    target = manager.target(part)
-    divergence = manager.divergence(part)
-    node = isinstance(manager.model.parts[part], NodePart)
-    observation = manager.observation(part) if node else None
+    status = manager.status(part)
+    actual, target, divergence = status.actual, status.target, status.divergence
     outcome = request_outcome(last)
     values: list[tuple[str, str]] = [
         ("target", str(target) if target is not None else ""),
@@ -92,9 +89,9 @@ def part_status(manager: ModeManager, part: str, last: Request | None, link: Any
         ("last_request_reason", last.reason if last is not None else ""),
         ("last_request_by", last.requester if last is not None else ""),
     ]
-    if observation is not None:
-        values.append(("reachable", "true" if observation.reachable else "false"))
-        back = manager.last_return(part)
+    if status.reachable is not None:
+        values.append(("reachable", "true" if status.reachable else "false"))
+        back = status.last_return
         values.append(("last_return", back.describe() if back is not None else ""))
         if link is not None:
             values.append(("round_trip_ms", f"{link.rtt * 1000:.1f}" if link.rtt is not None else ""))
@@ -102,12 +99,12 @@ def part_status(manager: ModeManager, part: str, last: Request | None, link: Any
     at_target = actual.known if target is None else actual.is_(target)
 
     level, message = OK, str(actual)
-    if observation is not None and not observation.reachable:
-        if observation.gone:
-            level, message = ERROR, f"unreachable: {observation.gone}"
+    if status.reachable is False:
+        if status.gone:
+            level, message = ERROR, f"unreachable: {status.gone}"
         else:
             level, message = STALE, "not found on the ROS graph yet"
-    elif part in manager.failed():
+    elif status.gave_up:
         level, message = ERROR, f"recovery gave up: {divergence.reason if divergence else actual}"
     elif divergence is not None and divergence.is_error:
         level, message = ERROR, f"target {divergence.target}, actual {actual}" + (
