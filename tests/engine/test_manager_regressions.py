@@ -774,3 +774,29 @@ def test_a_held_mode_whose_previous_target_was_finalized_is_not_put_back() -> No
         final=ChangeMode(part="laser_resender", mode="__DEFAULT__"),
         final_delay=1.0,
     ))
+
+
+# -- found by make test on 2026-11-27 (the session's start, 1b05178) ----------------------------------
+
+
+def test_a_final_request_made_before_the_news_of_a_restart_may_fail_naming_the_node() -> None:
+    """The healing restarted a crashed node just as its old process was found gone; the final
+    request was made before either report came (report_delay), and the old process's end failed it,
+    naming the node. The manager could not know its calls had reached the new process: the
+    invariant I3 counted the node as reachable and flagged the failure."""
+    check(Scenario(
+        model="nav2_like",
+        manager=ManagerOptions(grace_period=1.0, request_timeout=13.0, recovery_window=10.0, recovery=False),
+        sim=SimOptions(transition_delay=0.0, error_delay=0.0, vanish_after=0.5,
+                       slow=(("bt_navigator", 2.6), ("controller_server", 1.5)), report_delay=0.03),
+        steps=(
+            Step(0.0, Trigger(node="controller_server", choice=1, outcome="failure")),
+            Step(0.0, Crash(node="planner_server")),
+            Step(0.05, ChangeTo(part="navigation", target="active.f_normal_mode")),
+            Step(0.05, ChangeMode(part="navigation", mode="f_performance_mode")),
+            Step(0.05, ChangeMode(part="planner_server", mode="ASTAR")),
+        ),
+        tree=((TreeItem(kind="wait_for_mode", part="navigation", arg="f_normal_mode", timeout=0.5),),),
+        final=ChangeMode(part="navigation", mode="f_energy_saving_mode"),
+        final_delay=0.01,
+    ))

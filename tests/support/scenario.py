@@ -726,6 +726,10 @@ class _Runner:
         # manager may confirm the target from what it knows before the news comes.
         stale = {node for node in needed if self.backend.status(node) is NodeStatus.RUNNING
                  and self.manager.observation(node).state is not self.backend.node(node).state}
+        # And a node the healing restarted whose new process the manager has not heard of yet: the
+        # news of the old one's end may still be on its way too, and fail a request made now (the
+        # manager cannot tell that its calls reached the new process).
+        stale |= {node for node in needed if node in self.renewing}
         request = self.request(final, FINAL_TIMEOUT)
         assert request is not None, f"the final request {final} is not a valid one"
         self.advance(self.clock.now() + FINAL_TIMEOUT + 1.0, stop=lambda: request.done)
