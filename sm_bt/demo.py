@@ -188,7 +188,7 @@ def ros_platform(model: Model, world: World, options: Options, say: Callable[[st
 
 
 @dataclass
-class Story:
+class RunTally:
     """What happened, for the summary."""
 
     requests: list[Request] = field(default_factory=list)
@@ -238,7 +238,7 @@ class Demo:
                     self.say(f"view: {self.view.url}")
             # Times from the start: a wall clock's raw (monotonic) reading means nothing to a reader.
             self.monitor = Monitor(self.manager, self.console, epoch=self.clock.now())
-            self.story = Story()
+            self.tally = RunTally()
             self.final_mode = ""
             self._statuses: dict[py_trees.behaviour.Behaviour, Status] = {}
             self._key_moment = ""
@@ -313,12 +313,12 @@ class Demo:
         request = event.request
         if event.kind is EventKind.REQUEST and request is not None:
             if not request.done:
-                self.story.requests.append(request)
+                self.tally.requests.append(request)
                 self.say(f"-> {event.message} [{request.requester}]", "cyan")
             else:
                 self.say(f"<- {event.message}", "green" if request.succeeded else "red")
         elif event.kind is EventKind.FAILED:
-            self.story.gave_up.append(event.part)
+            self.tally.gave_up.append(event.part)
             self.say(f"!! {event.message}", "bold red")
         elif event.kind is EventKind.RULE:
             self.say(f"!! {event.message}", "magenta")
@@ -348,8 +348,8 @@ class Demo:
         if actual is None or actual.state is not State.ACTIVE or not actual.mode:
             return
         with self._lock:
-            if not self.story.modes or self.story.modes[-1][1] != actual.mode:
-                self.story.modes.append((self.elapsed(event.time), actual.mode))
+            if not self.tally.modes or self.tally.modes[-1][1] != actual.mode:
+                self.tally.modes.append((self.elapsed(event.time), actual.mode))
                 self._key_moment = actual.mode
 
     def _after_tick(self) -> None:
@@ -362,14 +362,14 @@ class Demo:
             if new is old or new is not Status.SUCCESS:
                 continue
             if isinstance(behaviour, NavigateTo):
-                self.story.waypoints += behaviour.waypoint != "recharge_station"
+                self.tally.waypoints += behaviour.waypoint != "recharge_station"
                 self._tell(f"robot at {behaviour.waypoint} ({self.world.odometer:.1f} m driven, "
                            f"battery {self.world.battery:.2f})")
             elif isinstance(behaviour, CompleteRound):
-                self.story.rounds = self.world.rounds
+                self.tally.rounds = self.world.rounds
                 self._tell(f"patrol round {self.world.rounds} of {self.options.cycles} complete")
             elif isinstance(behaviour, Recharge):
-                self.story.recharges += 1
+                self.tally.recharges += 1
                 self._tell("recharged: battery 1.00")
         # The tree's battery monitor says when the battery is low (below 0.5) or recovered.
         battery_ok = Blackboard.get(BATTERY_OK) if Blackboard.exists(BATTERY_OK) else True
@@ -416,7 +416,7 @@ class Demo:
         if self._broken_at is None:
             return False
         with self._lock:
-            last = self.story.modes[-1] if self.story.modes else None
+            last = self.tally.modes[-1] if self.tally.modes else None
         if last is not None and last[1] == pilot.DEGRADED and \
                 now - self.world.world_seconds(last[0]) >= DEGRADED_FOR:
             return True
@@ -486,12 +486,12 @@ class Demo:
         else:
             duration = f"{self.clock.now():.1f} s of virtual time ({wall:.1f} s wall)"
         out.print(f"  mission {self.root.status.value} after {duration}; {self.world.odometer:.1f} m driven, "
-                  f"{self.story.rounds} patrol round(s) ({self.story.waypoints} waypoints), "
-                  f"{self.story.recharges} recharge(s)", markup=False, soft_wrap=True)
-        modes = " -> ".join(f"{mode} ({at:.1f} s{unit})" for at, mode in self.story.modes)
+                  f"{self.tally.rounds} patrol round(s) ({self.tally.waypoints} waypoints), "
+                  f"{self.tally.recharges} recharge(s)", markup=False, soft_wrap=True)
+        modes = " -> ".join(f"{mode} ({at:.1f} s{unit})" for at, mode in self.tally.modes)
         out.print(f"  pilot modes: {modes}", markup=False, soft_wrap=True)
         by_requester: dict[str, list[Request]] = {}  # in the order each first asked
-        for request in self.story.requests:
+        for request in self.tally.requests:
             by_requester.setdefault(request.requester, []).append(request)
         for requester, requests in by_requester.items():
             ok = [r for r in requests if r.succeeded]
@@ -503,8 +503,8 @@ class Demo:
                 if not request.succeeded:
                     out.print(f"    #{request.id} {request.description}: {request.reason}", markup=False,
                               soft_wrap=True)
-        if self.story.gave_up:
-            out.print(f"  recovery gave up on: {', '.join(self.story.gave_up)} (left to the tree)", markup=False,
+        if self.tally.gave_up:
+            out.print(f"  recovery gave up on: {', '.join(self.tally.gave_up)} (left to the tree)", markup=False,
                       soft_wrap=True)
         final = self.final_mode or str(self.manager.actual(pilot.SYSTEM))
         expected = self.expected_mode()

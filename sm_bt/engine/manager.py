@@ -45,7 +45,7 @@ from sm_bt.engine.lifecycle import (
     step_for,
     transition_by_label,
 )
-from sm_bt.engine.presence import NodeReports, Return
+from sm_bt.engine.presence import NodeReports, NodeReturn
 from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.responses import Responses
@@ -56,7 +56,7 @@ from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue, resolve_mode
 
-__all__ = ["CLOSED", "REQUEST_TIMEOUT", "ModeManager", "Return"]
+__all__ = ["CLOSED", "REQUEST_TIMEOUT", "ModeManager", "NodeReturn"]
 
 log = logging.getLogger("sm_bt.manager")
 #: How long a request may take, by default (seconds of the backend's clock).
@@ -214,7 +214,7 @@ class ModeManager:
                             observation.gone if observation is not None else "",
                             self._reports.returns.get(part) if node else None)
 
-    def last_return(self, node: str) -> Return | None:
+    def last_return(self, node: str) -> NodeReturn | None:
         """How ``node`` came back the last time it had vanished (``None``: it never did)."""
         with self._lock:
             self._check_node(node)

@@ -1,7 +1,7 @@
 """What the backend reports of the nodes (appeared, state, parameters, vanished), applied.
 
 A node that vanishes fails the requests that drive it at once (not when one of their calls times
-out); one that comes back is reported with what changed while it was away (:class:`Return`), and
+out); one that comes back is reported with what changed while it was away (:class:`NodeReturn`), and
 its rules' and recovery's budget is whole again. A node that comes back from ``finalized`` is a
 new process: it starts a new life (:meth:`NodeReports._new_life`).
 """
@@ -27,7 +27,7 @@ log = logging.getLogger("sm_bt.manager")
 
 
 @dataclass(frozen=True)
-class Return:
+class NodeReturn:
     """A node that had vanished, back: how long it was away, and its state and mode before and after."""
 
     node: str
@@ -63,7 +63,7 @@ class NodeReports:
         self._clock = clock
         self._renew_budgets = renew_budgets
         self._away: dict[str, tuple[float, StateMode]] = {}  # vanished nodes: since when, and as they were
-        self.returns: dict[str, Return] = {}  # the last time each node came back
+        self.returns: dict[str, NodeReturn] = {}  # the last time each node came back
 
     def node_appeared(self, node: str, report: NodeReport) -> None:
         with self._serialiser:
@@ -78,7 +78,7 @@ class NodeReports:
             if away is not None:  # what changed while it was out of reach (recovery logs what it does)
                 since, before = away
                 after = self._inference.actual(node).state_mode
-                back = Return(node, self._clock.now() - since, before, after)
+                back = NodeReturn(node, self._clock.now() - since, before, after)
                 self.returns[node] = back
                 log.info("node %s appeared: %s", node, back.describe())
             self._drivers[node].advance()

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 from sm_bt.engine.events import Divergence
 from sm_bt.engine.inference import Actual
-from sm_bt.engine.presence import Return
+from sm_bt.engine.presence import NodeReturn
 from sm_bt.model.states import StateMode
 from sm_bt.model.types import PartKind
 
@@ -32,7 +32,7 @@ class PartSnapshot:
     gave_up: bool = False
     reachable: bool | None = None  # None for a system
     gone: str = ""
-    last_return: Return | None = None
+    last_return: NodeReturn | None = None
 
     @property
     def is_node(self) -> bool:

@@ -34,7 +34,7 @@ def test_demo_tells_the_whole_story(tree: str) -> None:
     assert re.search(r"pilot\s+active\s+active\(\*\)\s+f_degraded_mode\s+f_degraded_mode\(\*\)", text)
     assert "Patrol with contingencies" in text or "Patrol under metacontrol" in text
     # Both rounds, every waypoint of each, ending at the last one; a recharge is not a round.
-    assert (demo.story.rounds, demo.story.waypoints) == (2, 14) and demo.story.recharges >= 2
+    assert (demo.tally.rounds, demo.tally.waypoints) == (2, 14) and demo.tally.recharges >= 2
     assert_in_order(text, ["robot at wp_7", "patrol round 2 of 2 complete", "mission SUCCESS"])
 
 
@@ -157,7 +157,7 @@ def test_the_xml_pilot_tree_runs_the_same_demo_as_the_python_one() -> None:
 
 
 def _told(demo: Demo) -> str:
-    return re.sub(r"#\d+", "#", repr(demo.story))  # request numbers count the process's requests
+    return re.sub(r"#\d+", "#", repr(demo.tally))  # request numbers count the process's requests
 
 
 def _summary(text: str) -> list[str]:

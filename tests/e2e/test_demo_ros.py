@@ -106,7 +106,7 @@ def ros_demo() -> Iterator[tuple[int, str, Demo, float, list[Any]]]:
 
 
 def pilot_modes(demo: Demo) -> list[str]:
-    return [mode for _, mode in demo.story.modes]
+    return [mode for _, mode in demo.tally.modes]
 
 
 def test_the_ros_demo_runs_the_mission_on_real_nodes(ros_demo: tuple[int, str, Demo, float, list[Any]]) -> None:
@@ -121,13 +121,13 @@ def test_the_ros_demo_runs_the_mission_on_real_nodes(ros_demo: tuple[int, str, D
     story = PILOT_DEMO_STORY
     assert_in_order(text, story)
     assert "f_degraded_mode" in pilot_modes(demo)
-    assert demo.story.gave_up == ["laser_resender"]
+    assert demo.tally.gave_up == ["laser_resender"]
     # Wall times on ROS: stamps with both clocks, and a summary in wall seconds.
     assert re.search(r"\[\s*\d+\.\d\d s wall \|\s*\d+\.\d s world\] laser failure", text)
     assert re.search(r"mission SUCCESS after [\d.]+ s of world time \([\d.]+ s wall, world 40x\)", text)
     assert re.search(r"pilot modes: f_normal_mode \([\d.]+ s wall\)", text)
     # Every request was confirmed (the recovery's too), and the node process was stopped.
-    assert all(request.succeeded for request in demo.story.requests), text
+    assert all(request.succeeded for request in demo.tally.requests), text
     process = demo.platform.nodes.process  # type: ignore[attr-defined]
     assert process is not None and process.poll() is not None
     assert wall < 40.0, f"took {wall:.1f} s"
@@ -148,8 +148,8 @@ def test_simulated_and_ros_demos_visit_the_same_pilot_modes(
     assert pilot_modes(sim) == ["f_normal_mode", "f_degraded_mode", "f_normal_mode", "f_energy_saving_mode",
                                 "f_normal_mode"]
     assert ros.final_mode == str(sim.manager.actual("pilot")) == "active.f_normal_mode"
-    assert (ros.story.waypoints, ros.story.recharges, ros.story.gave_up) == \
-        (sim.story.waypoints, sim.story.recharges, sim.story.gave_up)
+    assert (ros.tally.waypoints, ros.tally.recharges, ros.tally.gave_up) == \
+        (sim.tally.waypoints, sim.tally.recharges, sim.tally.gave_up)
     assert ros.world.odometer == pytest.approx(sim.world.odometer, abs=0.5)
 
 
