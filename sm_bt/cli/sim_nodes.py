@@ -8,13 +8,10 @@ these stand in for a robot's nodes.
 from __future__ import annotations
 
 import argparse
-import sys
 
 from sm_bt.cli.arguments import non_negative
-from sm_bt.cli.common import PROG, CliError, load
+from sm_bt.cli.common import CliError, UsageError, load
 from sm_bt.model.errors import ModelError
-
-NAME = f"{PROG} sim-nodes"
 
 
 def _names(text: str) -> list[str]:
@@ -45,25 +42,21 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     from sm_bt.ros.sim_nodes import RefusedName, run_nodes, select_nodes
 
+    # A model or names that cannot run are usage errors (exit 2), as a parent process reads them.
     try:
         model = load(args.model)
     except ModelError as error:
-        print(f"{NAME}: error: {args.model}: invalid model: {'; '.join(map(str, error.issues))}", file=sys.stderr)
-        return 2
+        raise UsageError(f"{args.model}: invalid model: {'; '.join(map(str, error.issues))}") from None
     except CliError as error:
-        print(f"{NAME}: error: {error}", file=sys.stderr)
-        return 2
+        raise UsageError(str(error)) from None
     try:
         select_nodes(model, args.only, args.parameters_only)
-    except ValueError as error:
-        print(f"{NAME}: error: {error}", file=sys.stderr)
-        return 2
-    try:
         run_nodes(model, args.only, initial_state=args.state, parameters_only=args.parameters_only,
                   transition_delay=args.transition_delay, single_threaded=args.single_threaded)
-    except RefusedName as error:
-        print(f"{NAME}: error: {args.model}: {error}", file=sys.stderr)
-        return 2
+    except RefusedName as error:  # a part or parameter name ROS refuses
+        raise UsageError(f"{args.model}: {error}") from None
+    except ValueError as error:
+        raise UsageError(str(error)) from None
     except KeyboardInterrupt:  # a signal before our handlers were installed
         return 130
     return 0
