@@ -51,7 +51,7 @@ GATHER = 0.1
 
 
 @dataclass(frozen=True)
-class PartStatus:
+class PartDiagnostic:
     """What one part's ``DiagnosticStatus`` says."""
 
     part: str
@@ -73,7 +73,7 @@ def request_outcome(request: Request | None) -> str:
     return "succeeded" if request.succeeded else "failed"
 
 
-def part_status(manager: ModeManager, part: str, last: Request | None, link: Any = None) -> PartStatus:
+def part_diagnostic(manager: ModeManager, part: str, last: Request | None, link: Any = None) -> PartDiagnostic:
     """The status of ``part`` now (call with the manager's lock held); ``last``: its last request,
     ``link``: for a node, how it answers (:class:`sm_bt.ros.backend.Link`), if known."""
     status = manager.status(part)
@@ -122,7 +122,7 @@ def part_status(manager: ModeManager, part: str, last: Request | None, link: Any
     if level == OK and link is not None and link.slow:
         level, message = WARN, (f"{actual}; slow link: answers in {link.rtt * 1000:.0f} ms, silence for "
                                 f"{link.window:.1f} s means unreachable")
-    return PartStatus(part, level, message, tuple(values))
+    return PartDiagnostic(part, level, message, tuple(values))
 
 
 class DiagnosticsPublisher:
@@ -204,12 +204,12 @@ class DiagnosticsPublisher:
             self._timer = self._clock.call_later(self._period, self._publish_all)
         self._publish(list(self._manager.model.parts))
 
-    def statuses(self, parts: list[str]) -> list[PartStatus]:
+    def statuses(self, parts: list[str]) -> list[PartDiagnostic]:
         manager = self._manager
         with manager.lock:
             with self._lock:
                 last = {part: self._last.get(part) for part in parts}
-            return [part_status(manager, part, last[part], self._link_of(part)) for part in parts]
+            return [part_diagnostic(manager, part, last[part], self._link_of(part)) for part in parts]
 
     def _link_of(self, part: str) -> Any:
         if self._link is None or not isinstance(self._manager.model.parts[part], NodePart):

@@ -11,7 +11,7 @@ from model_files import bundled
 
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.requests import Request
-from sm_bt.ros.diagnostics import ERROR, OK, STALE, WARN, PartStatus, part_status
+from sm_bt.ros.diagnostics import ERROR, OK, STALE, WARN, PartDiagnostic, part_diagnostic
 from sm_bt.sim import SimulatedSystem
 
 
@@ -22,9 +22,9 @@ class SlowLink:
     slow: bool = True
 
 
-def status(rig: SimulatedSystem, part: str, last: Request | None = None, link: object = None) -> PartStatus:
+def status(rig: SimulatedSystem, part: str, last: Request | None = None, link: object = None) -> PartDiagnostic:
     with rig.manager.lock:
-        return part_status(rig.manager, part, last, link)
+        return part_diagnostic(rig.manager, part, last, link)
 
 
 def test_a_part_at_its_target_is_ok_with_its_values() -> None:

@@ -289,7 +289,7 @@ def test_diagnostics_are_built_only_for_a_reader_who_gets_every_part_within_the_
     built: list[list[str]] = []
     statuses = diagnostics.DiagnosticsPublisher.statuses
 
-    def counted(self: diagnostics.DiagnosticsPublisher, parts: list[str]) -> list[diagnostics.PartStatus]:
+    def counted(self: diagnostics.DiagnosticsPublisher, parts: list[str]) -> list[diagnostics.PartDiagnostic]:
         built.append(parts)
         return statuses(self, parts)
 
