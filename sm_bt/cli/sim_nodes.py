@@ -51,12 +51,13 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(error)) from None
     try:
         select_nodes(model, args.only, args.parameters_only)
+    except ValueError as error:  # names that are not nodes of the model
+        raise UsageError(str(error)) from None
+    try:
         run_nodes(model, args.only, initial_state=args.state, parameters_only=args.parameters_only,
                   transition_delay=args.transition_delay, single_threaded=args.single_threaded)
     except RefusedName as error:  # a part or parameter name ROS refuses
         raise UsageError(f"{args.model}: {error}") from None
-    except ValueError as error:
-        raise UsageError(str(error)) from None
     except KeyboardInterrupt:  # a signal before our handlers were installed
         return 130
     return 0

@@ -42,7 +42,7 @@ def reference_issues(text: str, filename: str) -> list[ModelIssue]:
         elif decl.kind is PartKind.NODE:
             _node_modes(decl, decl.modes, found)
             if decl.match is not None:
-                found.error(_line(decl.match), f"node {decl.name}: the reference has no 'match:' (it compares every "
+                found.error(decl.match.line, f"node {decl.name}: the reference has no 'match:' (it compares every "
                                                "parameter exactly): its inference will not recognise values inside "
                                                "these ranges; drop 'match:' or give exact values")
         _rules(decl, found)
@@ -59,10 +59,6 @@ class _Found:
 
     def warning(self, line: int, message: str) -> None:
         self.issues.append(ModelIssue(Location(self.filename, line), Severity.WARNING, f"reference: {message}"))
-
-
-def _line(node: YNode) -> int:
-    return node.line
 
 
 def _default_mode(decl: PartDecl, found: _Found) -> None:

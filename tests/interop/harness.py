@@ -208,7 +208,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report-only", action="store_true",
                         help="run nothing: write the report again from OUT/results.json")
     args = parser.parse_args(argv)
-    prefix = reference_prefix()
+    try:
+        prefix = reference_prefix()
+    except RuntimeError as error:
+        print(f"interop: error: {error}", file=sys.stderr)
+        return 2
     prepare(own_domain=True)
     base = int(os.environ["ROS_DOMAIN_ID"])
     args.out.mkdir(parents=True, exist_ok=True)

@@ -19,9 +19,10 @@ from ros_processes import NodeProcess
 
 from sm_bt import bundled
 from sm_bt.model import load_model
+from sm_bt.model.system_modes import ORDER_KEY
 
 #: A system-mode entry the reference cannot read (it takes it for a part and crashes).
-_ORDER_LINE = re.compile(r"^\s*__order__\s*:")
+_ORDER_LINE = re.compile(rf"^\s*{ORDER_KEY}\s*:")
 
 
 def reference_prefix() -> Path:
