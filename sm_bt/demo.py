@@ -377,14 +377,18 @@ class Demo:
             self._battery_ok = battery_ok
             self._tell("battery recovered" if battery_ok else
                        f"battery low ({comparison(self.world.battery, pilot.BATTERY_LOW)})", "bold")
-        self._release()
-        with self._lock:
-            mode, self._key_moment = self._key_moment, ""
-        if mode:
-            self.say(f"== pilot is now active.{mode} ==", "bold")
-            if mode not in self._shown_modes:  # the table and tree once per mode, to stay readable
-                self._shown_modes.add(mode)
-                self.show()
+        # Under the manager's lock: on ROS its events are told from another thread, and the change
+        # that reached a mode is told with the rest of its events (the request's end among them)
+        # before the mode is announced, never in between.
+        with self.manager.lock:
+            self._release()
+            with self._lock:
+                mode, self._key_moment = self._key_moment, ""
+            if mode:
+                self.say(f"== pilot is now active.{mode} ==", "bold")
+                if mode not in self._shown_modes:  # the table and tree once per mode, to stay readable
+                    self._shown_modes.add(mode)
+                    self.show()
 
     def _tell(self, text: str, style: str = "") -> None:
         """Say ``text`` ahead of the manager events held during the tick."""
