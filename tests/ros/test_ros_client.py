@@ -85,11 +85,14 @@ def test_a_change_not_confirmed_in_time_fails_and_says_where_the_part_is(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter,
         capsys: pytest.CaptureFixture[str]) -> None:
     manager = start_manager()
-    node_processes("pilot", "--transition-delay", "3")
+    # The timeout bounds the call too: a fresh client may find the manager's service only after a
+    # few seconds on a loaded machine (DDS discovery), so it is longer than that, and the
+    # transitions longer still.
+    node_processes("pilot", "--transition-delay", "8")
     manager.ready()
-    code, out, err = sm_bt(capsys, "state", "set", "pilot", "configure", "--wait", "--timeout", "1")
+    code, out, err = sm_bt(capsys, "state", "set", "pilot", "configure", "--wait", "--timeout", "4")
     assert (code, out) == (1, "")
-    assert re.fullmatch(r"sm-bt: error: not confirmed within 1 s: pilot is \w+, not inactive\n", err), err
+    assert re.fullmatch(r"sm-bt: error: not confirmed within 4 s: pilot is \w+, not inactive\n", err), err
 
 
 def test_a_change_the_manager_fails_ends_the_wait_at_once_with_its_reason(
