@@ -17,7 +17,7 @@ from typing import Protocol
 
 from sm_bt.engine.backend import CallResult, Done
 from sm_bt.engine.inference import NodeObservation
-from sm_bt.engine.lifecycle import PlanError, Step, Transition, plan
+from sm_bt.engine.lifecycle import PlanError, Transition, TransitionEdge, plan
 from sm_bt.model.states import State
 from sm_bt.model.types import NodeMode, ParamValue
 
@@ -247,7 +247,7 @@ class NodeDriver:
         self._sets += 1
         self.io.send_parameters(self.node, values, call.answered)
 
-    def _send_transition(self, owner: Owner, step: Step, more: str) -> None:
+    def _send_transition(self, owner: Owner, step: TransitionEdge, more: str) -> None:
         call = _DriverCall(self, step.transition.label + more, self.io.now(), owner, step.transition, step.goal)
         self.call = call
         self.io.send_transition(self.node, step.transition, call.answered)

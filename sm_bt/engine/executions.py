@@ -24,7 +24,7 @@ from sm_bt.engine.events import EventKind
 from sm_bt.engine.hierarchy import implied_targets
 from sm_bt.engine.ledger import Ledger
 from sm_bt.engine.lifecycle import Transition
-from sm_bt.engine.plans import Sequence, Step, build_plan
+from sm_bt.engine.plans import NodeJob, Sequence, build_plan
 from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.serialiser import Serialiser
@@ -45,10 +45,10 @@ class Execution:
     they reached their goals (the part as a whole is no longer expected to reach the target).
     """
 
-    def __init__(self, host: Executions, request: Request, scope: frozenset[str],
+    def __init__(self, executions: Executions, request: Request, scope: frozenset[str],
                  previous_targets: dict[str, tuple[StateMode | None, Origin | None]],
                  continuation: bool = False) -> None:
-        self.host = host
+        self.executions = executions
         self.request = request
         self.scope = scope
         self.previous_targets = previous_targets
@@ -56,30 +56,30 @@ class Execution:
         self.active = True
         self.planned = False  # every step reached its goal; waiting for the part's actual to confirm
         self.timer: TimerHandle | None = None
-        self.root, self.steps = build_plan(host.model, self, request.part, request.target,
+        self.root, self.steps = build_plan(executions.model, self, request.part, request.target,
                                            scope if continuation else None)
 
     # -- the plan's run (see plans.Run) ---------------------------------------------------------
 
-    def later(self, action: Callable[[], None]) -> None:
-        self.host.later(action)
+    def defer(self, action: Callable[[], None]) -> None:
+        self.executions.defer(action)
 
     def driver(self, node: str) -> NodeDriver:
-        return self.host.driver(node)
+        return self.executions.driver(node)
 
     def plan_done(self) -> None:
         if self.active:
             self.planned = True
-            self.host.confirm(self)
+            self.executions.confirm(self)
 
     def plan_failed(self, reason: str) -> None:
         if self.active:
-            self.host.finish(self, False, reason)
+            self.executions.finish(self, False, reason)
 
     # -- life -----------------------------------------------------------------------------------
 
     def start(self) -> None:
-        self.later(self.root.start)
+        self.defer(self.root.start)
 
     def stop(self) -> None:
         """No further steps: the drivers are released (calls in flight still complete)."""
@@ -91,7 +91,7 @@ class Execution:
 
     # -- what it is doing -----------------------------------------------------------------------
 
-    def _running(self) -> list[Step]:
+    def _running(self) -> list[NodeJob]:
         return [s for s in self.steps if s.started and not s.done]
 
     def feedback(self) -> str:
@@ -135,8 +135,8 @@ class Executions:
 
     # -- what executions need (see Execution) ------------------------------------------------------
 
-    def later(self, action: Callable[[], None]) -> None:
-        self._serialiser.later(action)
+    def defer(self, action: Callable[[], None]) -> None:
+        self._serialiser.defer(action)
 
     def driver(self, node: str) -> NodeDriver:
         return self._drivers[node]

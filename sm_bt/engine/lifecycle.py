@@ -80,7 +80,7 @@ for _t in Transition:
 
 
 @dataclass(frozen=True)
-class Step:
+class TransitionEdge:
     """A transition requested from a primary state: it passes ``via`` and ends in ``goal`` on success."""
 
     transition: Transition
@@ -90,18 +90,18 @@ class Step:
 
 
 #: The transitions a client may request (``change_state``), by start state.
-REQUESTABLE: tuple[Step, ...] = (
-    Step(Transition.CONFIGURE, State.UNCONFIGURED, State.CONFIGURING, State.INACTIVE),
-    Step(Transition.CLEANUP, State.INACTIVE, State.CLEANINGUP, State.UNCONFIGURED),
-    Step(Transition.ACTIVATE, State.INACTIVE, State.ACTIVATING, State.ACTIVE),
-    Step(Transition.DEACTIVATE, State.ACTIVE, State.DEACTIVATING, State.INACTIVE),
-    Step(Transition.UNCONFIGURED_SHUTDOWN, State.UNCONFIGURED, State.SHUTTINGDOWN, State.FINALIZED),
-    Step(Transition.INACTIVE_SHUTDOWN, State.INACTIVE, State.SHUTTINGDOWN, State.FINALIZED),
-    Step(Transition.ACTIVE_SHUTDOWN, State.ACTIVE, State.SHUTTINGDOWN, State.FINALIZED),
+REQUESTABLE: tuple[TransitionEdge, ...] = (
+    TransitionEdge(Transition.CONFIGURE, State.UNCONFIGURED, State.CONFIGURING, State.INACTIVE),
+    TransitionEdge(Transition.CLEANUP, State.INACTIVE, State.CLEANINGUP, State.UNCONFIGURED),
+    TransitionEdge(Transition.ACTIVATE, State.INACTIVE, State.ACTIVATING, State.ACTIVE),
+    TransitionEdge(Transition.DEACTIVATE, State.ACTIVE, State.DEACTIVATING, State.INACTIVE),
+    TransitionEdge(Transition.UNCONFIGURED_SHUTDOWN, State.UNCONFIGURED, State.SHUTTINGDOWN, State.FINALIZED),
+    TransitionEdge(Transition.INACTIVE_SHUTDOWN, State.INACTIVE, State.SHUTTINGDOWN, State.FINALIZED),
+    TransitionEdge(Transition.ACTIVE_SHUTDOWN, State.ACTIVE, State.SHUTTINGDOWN, State.FINALIZED),
 )
 
 #: The step of each requestable transition (each has one start state).
-STEP_OF: dict[Transition, Step] = {step.transition: step for step in REQUESTABLE}
+EDGE_OF: dict[Transition, TransitionEdge] = {step.transition: step for step in REQUESTABLE}
 
 #: The requestable transitions by label, in lifecycle order (``shutdown`` resolves by start state).
 REQUESTABLE_LABELS: tuple[str, ...] = ("configure", "activate", "deactivate", "cleanup", "shutdown")
@@ -145,7 +145,7 @@ class PlanError(Error, ValueError):
     """No sequence of transitions leads from one state to the other."""
 
 
-def step_for(start: State, transition: Transition) -> Step:
+def edge_for(start: State, transition: Transition) -> TransitionEdge:
     """The step ``transition`` makes from ``start``; ``PlanError`` if it is not valid there."""
     for step in REQUESTABLE:
         if step.start is start and step.transition is transition:
@@ -165,7 +165,7 @@ def transition_by_label(label: str, start: State) -> Transition:
     raise PlanError(f"{label!r} is not a lifecycle transition label")
 
 
-def plan(start: State, goal: State) -> tuple[Step, ...]:
+def plan(start: State, goal: State) -> tuple[TransitionEdge, ...]:
     """The shortest sequence of requestable transitions from primary ``start`` to primary ``goal``.
 
     ``()`` when they are equal. ``PlanError`` when either is not a primary state, or when no path
@@ -183,20 +183,20 @@ def plan(start: State, goal: State) -> tuple[Step, ...]:
     return planned
 
 
-_PLANS: dict[tuple[State, State], tuple[Step, ...] | PlanError] = {}
+_PLANS: dict[tuple[State, State], tuple[TransitionEdge, ...] | PlanError] = {}
 
 
-def _search(start: State, goal: State) -> tuple[Step, ...]:
+def _search(start: State, goal: State) -> tuple[TransitionEdge, ...]:
     for state, role in ((start, "start"), (goal, "goal")):
         if state not in PRIMARY_STATES:
             raise PlanError(f"cannot plan from or to {state.label}: the {role} must be a primary state")
-    previous: dict[State, Step] = {}
+    previous: dict[State, TransitionEdge] = {}
     queue = deque([start])
     seen = {start}
     while queue:
         current = queue.popleft()
         if current is goal:
-            path: list[Step] = []
+            path: list[TransitionEdge] = []
             while current is not start:
                 step = previous[current]
                 path.append(step)

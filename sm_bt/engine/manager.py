@@ -42,7 +42,7 @@ from sm_bt.engine.lifecycle import (
     REQUESTABLE_LABELS,
     PlanError,
     Transition,
-    step_for,
+    edge_for,
     transition_by_label,
 )
 from sm_bt.engine.presence import NodeReports, NodeReturn
@@ -260,7 +260,7 @@ class ModeManager:
             goal = _GOAL[resolved]
             try:
                 if current.is_primary and goal is not current and not self._moving(part):
-                    step_for(current, resolved)  # raises with the valid ones when invalid here
+                    edge_for(current, resolved)  # raises with the valid ones when invalid here
             except PlanError as error:
                 return self._executions.refuse(part, description, f"{part}: {error}", requester)
             mode = self._ledger.mode_for_activation(part) if goal is State.ACTIVE else None

@@ -1,10 +1,10 @@
 """Execution plans: what a target asks of each node, in the model's switching order.
 
-A plan is a tree of jobs: a :class:`Step` takes one node to its goal (through the node's
+A plan is a tree of jobs: a :class:`NodeJob` takes one node to its goal (through the node's
 :class:`~sm_bt.engine.drivers.NodeDriver`); :class:`Sequence` runs the stages of a switching
 order one after another, :class:`Parallel` the parts of one stage together. Progress is pushed,
 not polled: a step that reaches its goal tells its parent, which starts what comes next. Every
-hand-over goes through the run's agenda (``later``), so nothing recurses however deep the
+hand-over goes through the run's agenda (``defer``), so nothing recurses however deep the
 hierarchy is, and the work per node report is proportional to what it changes.
 """
 
@@ -26,7 +26,7 @@ class Run(Protocol):
     def active(self) -> bool:
         """False once the execution finished: late hand-overs are then ignored."""
 
-    def later(self, action: Callable[[], None]) -> None:
+    def defer(self, action: Callable[[], None]) -> None:
         """Run ``action`` once the current one is over (the manager's agenda)."""
 
     def driver(self, node: str) -> NodeDriver: ...
@@ -50,12 +50,12 @@ class Job:
         self.done = True
         parent = self.parent
         if parent is None:
-            self.run.later(self.run.plan_done)
+            self.run.defer(self.run.plan_done)
         else:
-            self.run.later(lambda: parent.child_done(self))
+            self.run.defer(lambda: parent.child_done(self))
 
 
-class Step(Job):
+class NodeJob(Job):
     """Take ``node`` to ``goal``; once there, watch it until the execution ends."""
 
     def __init__(self, run: Run, node: str, goal: Goal) -> None:
@@ -113,7 +113,7 @@ class Sequence(_Composite):
 
     def _next(self) -> None:
         if self.index < len(self.children):
-            self.run.later(self.children[self.index].start)
+            self.run.defer(self.children[self.index].start)
         else:
             self._finished()
 
@@ -128,7 +128,7 @@ class Parallel(_Composite):
         if not self.children:
             self._finished()
         for child in self.children:
-            self.run.later(child.start)
+            self.run.defer(child.start)
 
     def child_done(self, child: Job) -> None:
         if self.run.active:
@@ -138,7 +138,7 @@ class Parallel(_Composite):
 
 
 def build_plan(model: Model, run: Run, part: str, target: StateMode,
-               only: frozenset[str] | None = None) -> tuple[Job, list[Step]]:
+               only: frozenset[str] | None = None) -> tuple[Job, list[NodeJob]]:
     """The plan taking ``part`` to ``target``, and its steps (one per node, in plan order).
 
     A system's target becomes a :class:`Sequence` of its switching order's stages, each a
@@ -147,7 +147,7 @@ def build_plan(model: Model, run: Run, part: str, target: StateMode,
     its first place (the one :func:`~sm_bt.engine.hierarchy.implied_targets` gives its target).
     With ``only``, the plan drives those nodes alone (in the same order; other steps are left out).
     """
-    steps: list[Step] = []
+    steps: list[NodeJob] = []
     seen: set[str] = set()
     top: list[Job] = []
     # Top-down without recursion: each entry is a part to expand and the child list its job joins
@@ -163,7 +163,7 @@ def build_plan(model: Model, run: Run, part: str, target: StateMode,
             if only is not None and name not in only:
                 continue
             mode = spec.modes[value.mode or spec.default_mode] if value.state is State.ACTIVE else None
-            step = Step(run, name, Goal(value.state, mode))
+            step = NodeJob(run, name, Goal(value.state, mode))
             steps.append(step)
             into.append(step)
             continue

@@ -29,7 +29,7 @@ from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model, NodePart, Rule
 
 
-class View(Protocol):
+class StateReader(Protocol):
     def actual(self, part: str) -> Actual: ...
 
     def target(self, part: str) -> StateMode | None: ...
@@ -100,7 +100,7 @@ class Reactions:
 
     # -- decisions --------------------------------------------------------------------------------
 
-    def decide(self, faults: list[Divergence], view: View) -> list[Action]:
+    def decide(self, faults: list[Divergence], view: StateReader) -> list[Action]:
         """The reactions to ``faults`` (bottom-up), in the order to carry them out: every rule
         that applies first, then restoring the nodes that no rule above covers."""
         actions: list[Action] = []
@@ -130,7 +130,7 @@ class Reactions:
             actions.append(attempt if isinstance(attempt, GiveUp) else Restore(node, divergence.target, attempt))
         return actions
 
-    def _matching_rule(self, divergence: Divergence, view: View) -> Rule | None:
+    def _matching_rule(self, divergence: Divergence, view: StateReader) -> Rule | None:
         for rule in self._model.parts[divergence.part].rules:
             condition = view.actual(rule.if_part)
             if rule.if_target == divergence.target and condition.is_(rule.if_part_state) \
@@ -138,7 +138,7 @@ class Reactions:
                 return rule
         return None
 
-    def _undoes_users_choice(self, rule: Rule, view: View) -> bool:
+    def _undoes_users_choice(self, rule: Rule, view: StateReader) -> bool:
         """Firing the rule would re-target a part below its system that a user asked for directly (an
         override, left alone): its new target asks something else of that part."""
         for part, wanted in implied_targets(self._model, rule.system, rule.new_target)[1:]:
@@ -146,7 +146,7 @@ class Reactions:
                 return True
         return False
 
-    def _users_choice(self, rule: Rule, view: View) -> bool:
+    def _users_choice(self, rule: Rule, view: StateReader) -> bool:
         """The rule's condition holds because a user asked for it: its part is where its target
         says, and a user chose that target (for the part, or for a system between it and the
         rule's system). A rule never fires against that, nor when it would undo one (see below)."""

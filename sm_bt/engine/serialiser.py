@@ -53,7 +53,7 @@ class Serialiser:
         finally:
             self.lock.release()
 
-    def later(self, action: Callable[[], None]) -> None:
+    def defer(self, action: Callable[[], None]) -> None:
         """Run ``action`` when the current entry settles (plans handing over to their next steps)."""
         self._agenda.append(action)
 

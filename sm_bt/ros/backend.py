@@ -54,7 +54,7 @@ from rclpy.qos import QoSProfile, qos_profile_parameter_events
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
 from sm_bt.engine.clock import TimerHandle, WallClock
-from sm_bt.engine.lifecycle import STEP_OF, Transition
+from sm_bt.engine.lifecycle import EDGE_OF, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import removable
@@ -185,7 +185,7 @@ class RosBackend:
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
         peer = self._peer(node)
-        step = STEP_OF.get(transition)
+        step = EDGE_OF.get(transition)
         in_flight = TransitionInFlight(step.goal, step.via) if step is not None else TransitionInFlight(None)
         seen = in_flight.seen  # transition events received while the call is in flight
         with self._lock:
@@ -240,7 +240,7 @@ class RosBackend:
     def _transition_confirmed(self, peer: Peer, transition: Transition, seen: list[State]) -> None:
         """A transition of ours succeeded: the node is in its goal now; report that at once and
         expect the events of it that have not come yet (the transition state, the goal)."""
-        step = STEP_OF.get(transition)
+        step = EDGE_OF.get(transition)
         if step is None:
             return
         deadline = self._clock.now() + ECHO_WINDOW

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from sm_bt.engine.clock import Clock
-from sm_bt.engine.lifecycle import OUTCOMES, REQUESTABLE, Outcome, PlanError, Transition, step_for
+from sm_bt.engine.lifecycle import OUTCOMES, REQUESTABLE, Outcome, PlanError, Transition, edge_for
 from sm_bt.model.errors import Error
 from sm_bt.model.states import State
 from sm_bt.model.types import ParamValue
@@ -147,7 +147,7 @@ class SimNode:
                 f"cannot {transition.label} while {self._state} (a transition is in progress)"
             )
         try:
-            step = step_for(self._state, transition)
+            step = edge_for(self._state, transition)
         except PlanError as error:
             raise TransitionRefused(str(error)) from None
         return self._move(transition, step.via)

@@ -9,8 +9,8 @@ from sm_bt.engine.lifecycle import (
     Outcome,
     PlanError,
     Transition,
+    edge_for,
     plan,
-    step_for,
     transition_by_label,
 )
 from sm_bt.model.states import State
@@ -75,7 +75,7 @@ def test_outcome_table_follows_rcl_lifecycle() -> None:
 
 def test_invalid_transition_names_the_valid_ones() -> None:
     with pytest.raises(PlanError, match=r"cleanup is not valid in state active \(valid: deactivate, shutdown\)"):
-        step_for(A, Transition.CLEANUP)
+        edge_for(A, Transition.CLEANUP)
 
 
 def test_label_resolution_depends_on_start_state() -> None:

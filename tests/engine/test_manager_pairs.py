@@ -26,7 +26,7 @@ import pytest
 from model_generator import fixed_model
 from scenario import BUSY_REFUSAL, ChangeMode, ChangeState, RequestAction, needed_nodes
 
-from sm_bt.engine.lifecycle import PlanError, step_for, transition_by_label
+from sm_bt.engine.lifecycle import PlanError, edge_for, transition_by_label
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
@@ -87,7 +87,7 @@ def invalid_from(model: Model, action: RequestAction, state: State | None) -> bo
     if state is goal:
         return False
     try:
-        step_for(state, transition)
+        edge_for(state, transition)
     except PlanError:
         return True
     return False

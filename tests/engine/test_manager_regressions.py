@@ -21,8 +21,8 @@ from scenario import (
     RejectParameters,
     Restart,
     Scenario,
+    Scheduled,
     SimOptions,
-    Step,
     TreeItem,
     Trigger,
     check,
@@ -36,7 +36,7 @@ def test_configure_then_a_mode_at_the_same_instant() -> None:
     state while the configure calls were in flight: "cannot configure while configuring" (I3, I4)."""
     check(Scenario(
         model="pilot",
-        steps=(Step(0.0, ChangeState(part="pilot", transition="configure")),),
+        steps=(Scheduled(0.0, ChangeState(part="pilot", transition="configure")),),
         final=ChangeMode(part="pilot", mode="f_normal_mode"),
         final_delay=0.0,
     ))
@@ -46,7 +46,7 @@ def test_a_node_then_its_system_at_the_same_instant() -> None:
     """Item 1 across levels: a node request, then a system mode that drives the same node (I3, I4)."""
     check(Scenario(
         model="pilot",
-        steps=(Step(0.0, ChangeTo(part="amcl", target="active")),),
+        steps=(Scheduled(0.0, ChangeTo(part="amcl", target="active")),),
         final=ChangeMode(part="pilot", mode="f_performance_mode"),
         final_delay=0.0,
     ))
@@ -56,7 +56,7 @@ def test_a_system_then_one_of_its_nodes_at_the_same_instant() -> None:
     """Item 1 the other way round, with rules on (I3, I4)."""
     check(Scenario(
         model="pilot_rules",
-        steps=(Step(0.0, ChangeState(part="pilot", transition="configure")),),
+        steps=(Scheduled(0.0, ChangeState(part="pilot", transition="configure")),),
         final=ChangeMode(part="laser_resender", mode="__DEFAULT__"),
         final_delay=0.0,
     ))
@@ -69,9 +69,9 @@ def test_recovery_gives_up_on_a_hung_node() -> None:
         model="nav2_like",
         manager=ManagerOptions(grace_period=0.0, recovery_window=30.0),
         steps=(
-            Step(0.0, HangNext(node="amcl", transition="configure")),
-            Step(0.0, ChangeTo(part="amcl", target="active")),
-            Step(185.0, RejectParameters(node="amcl", reason=None)),
+            Scheduled(0.0, HangNext(node="amcl", transition="configure")),
+            Scheduled(0.0, ChangeTo(part="amcl", target="active")),
+            Scheduled(185.0, RejectParameters(node="amcl", reason=None)),
         ),
         final=ChangeMode(part="planning", mode="__DEFAULT__"),
         expect_given_up="amcl",
@@ -85,9 +85,9 @@ def test_a_hung_node_given_up_is_reported_as_an_error() -> None:
         model="nested",
         manager=ManagerOptions(grace_period=0.5, request_timeout=3.0, recovery_window=5.0),
         steps=(
-            Step(0.0, HangNext(node="arm", transition="configure")),
-            Step(0.0, ChangeTo(part="arm", target="active")),
-            Step(27.5, RejectParameters(node="arm", reason=None)),
+            Scheduled(0.0, HangNext(node="arm", transition="configure")),
+            Scheduled(0.0, ChangeTo(part="arm", target="active")),
+            Scheduled(27.5, RejectParameters(node="arm", reason=None)),
         ),
         final=ChangeTo(part="drive", target="active.SLOW"),
         expect_given_up="arm",
@@ -101,8 +101,8 @@ def test_rules_cascade_from_localization_to_navigation() -> None:
         model="nav2_like",
         manager=ManagerOptions(grace_period=0.5),
         steps=(
-            Step(0.0, ChangeMode(part="navigation", mode="f_normal_mode")),
-            Step(5.0, Trigger(node="map_server", outcome="error")),
+            Scheduled(0.0, ChangeMode(part="navigation", mode="f_normal_mode")),
+            Scheduled(5.0, Trigger(node="map_server", outcome="error")),
         ),
         final=ChangeMode(part="planning", mode="NORMAL"),
     ))
@@ -115,8 +115,8 @@ def test_rules_cascade_in_a_generated_model() -> None:
         model="generated",
         model_text=CASCADE_MODEL,
         steps=(
-            Step(0.0, ChangeMode(part="s0", mode="S3")),
-            Step(0.0, Trigger(node="n1", outcome="error")),
+            Scheduled(0.0, ChangeMode(part="s0", mode="S3")),
+            Scheduled(0.0, Trigger(node="n1", outcome="error")),
         ),
         final=ChangeTo(part="n1", target="active.__DEFAULT__"),
     ))
@@ -128,7 +128,7 @@ def test_hold_mode_ends_when_its_mode_is_lost_before_the_work_starts() -> None:
     check(Scenario(
         model="actuation",
         sim=SimOptions(transition_delay=0.0),
-        steps=(Step(0.018, ChangeMode(part="actuation", mode="__DEFAULT__")),),
+        steps=(Scheduled(0.018, ChangeMode(part="actuation", mode="__DEFAULT__")),),
         tree=((TreeItem(kind="hold_mode", part="actuation", arg="MODERATE", timeout=9.8, ticks=3),),),
         final=ChangeMode(part="manipulator", mode="__DEFAULT__"),
     ))
@@ -145,9 +145,9 @@ def test_a_node_cleaned_up_by_itself_after_a_preempted_configure_can_be_driven_a
     check(Scenario(
         model="pilot",
         steps=(
-            Step(0.0, ChangeMode(part="pilot", mode="__DEFAULT__")),
-            Step(0.0, ChangeMode(part="laser_resender", mode="__DEFAULT__")),
-            Step(1.0, Trigger(node="pointcloud_to_laser")),
+            Scheduled(0.0, ChangeMode(part="pilot", mode="__DEFAULT__")),
+            Scheduled(0.0, ChangeMode(part="laser_resender", mode="__DEFAULT__")),
+            Scheduled(1.0, Trigger(node="pointcloud_to_laser")),
         ),
         final=ChangeTo(part="pointcloud_to_laser", target="active"),
     ))
@@ -162,8 +162,8 @@ def test_a_rule_does_not_undo_what_the_user_asked_for() -> None:
         model_text=USER_CHANGE_MODEL,
         manager=ManagerOptions(grace_period=0.0, recovery=False),
         steps=(
-            Step(0.0, ChangeMode(part="s1", mode="__DEFAULT__")),
-            Step(1.0, Trigger(node="n2", outcome="error")),
+            Scheduled(0.0, ChangeMode(part="s1", mode="__DEFAULT__")),
+            Scheduled(1.0, Trigger(node="n2", outcome="error")),
         ),
         final=ChangeTo(part="n0", target="active.M1"),
     ))
@@ -182,10 +182,10 @@ def test_a_parent_diverging_after_a_cascade_does_not_stay_in_grace() -> None:
         model_text=GRACE_MODEL,
         manager=ManagerOptions(grace_period=0.5, request_timeout=2.0, recovery_attempts=1, recovery=False),
         steps=(
-            Step(0.0, ChangeMode(part="s0", mode="__DEFAULT__")),
-            Step(0.5, Trigger(node="n0", outcome="error")),
-            Step(0.61, Trigger(node="n0")),
-            Step(0.61, Trigger(node="n2")),
+            Scheduled(0.0, ChangeMode(part="s0", mode="__DEFAULT__")),
+            Scheduled(0.5, Trigger(node="n0", outcome="error")),
+            Scheduled(0.61, Trigger(node="n0")),
+            Scheduled(0.61, Trigger(node="n2")),
         ),
         final=ChangeMode(part="s0", mode="__DEFAULT__"),
     ))
@@ -203,7 +203,7 @@ def test_reports_of_a_transition_the_node_made_by_itself_do_not_mislead_the_driv
         model="nested",
         manager=ManagerOptions(grace_period=0.1, recovery=False),
         sim=SimOptions(transition_delay=0.0, report_delay=0.03),
-        steps=(Step(1.0, Trigger(node="lidar", outcome="failure")),),
+        steps=(Scheduled(1.0, Trigger(node="lidar", outcome="failure")),),
         final=ChangeTo(part="lidar", target="inactive"),
         final_delay=0.0,
     ))
@@ -218,8 +218,8 @@ def test_a_node_restarted_at_the_instant_of_a_request_may_be_refused_for_it() ->
         manager=ManagerOptions(grace_period=0.0, request_timeout=13.0, recovery_window=30.0, rules=False),
         sim=SimOptions(vanish_after=3.0, report_delay=0.03),
         steps=(
-            Step(1.0, Crash(node="controller_server")),
-            Step(5.0, RejectParameters(node="laser_resender", reason=None)),  # known vanished by now
+            Scheduled(1.0, Crash(node="controller_server")),
+            Scheduled(5.0, RejectParameters(node="laser_resender", reason=None)),  # known vanished by now
         ),
         final=ChangeMode(part="pilot", mode="f_normal_mode"),
         final_delay=0.0,
@@ -236,7 +236,7 @@ def test_a_transition_refused_because_the_node_moved_by_itself_is_planned_again(
         manager=ManagerOptions(grace_period=0.5, request_timeout=20.0, recovery_attempts=1),
         sim=SimOptions(transition_delay=0.2, error_delay=0.0, parameter_delay=0.0,
                        initial_state=(("lidar", "inactive"),), report_delay=0.03),
-        steps=(Step(1.0, Trigger(node="lidar", choice=2, on_error="failure")),),
+        steps=(Scheduled(1.0, Trigger(node="lidar", choice=2, on_error="failure")),),
         final=ChangeTo(part="lidar", target="unconfigured"),
         final_delay=0.01,
     ))
@@ -251,8 +251,8 @@ def test_a_transition_refused_after_a_restart_not_yet_reported_is_planned_again(
         manager=ManagerOptions(grace_period=0.5, request_timeout=13.0, recovery_window=5.0, recovery=False),
         sim=SimOptions(transition_delay=0.01, error_delay=0.0, report_delay=0.005),
         steps=(
-            Step(0.0, ChangeMode(part="robot", mode="__DEFAULT__")),
-            Step(20.67, Restart(node="drive")),
+            Scheduled(0.0, ChangeMode(part="robot", mode="__DEFAULT__")),
+            Scheduled(20.67, Restart(node="drive")),
         ),
         final=ChangeTo(part="base", target="unconfigured"),
         final_delay=0.0,
@@ -268,7 +268,7 @@ def test_the_nodes_a_preempting_request_does_not_drive_are_carried_on() -> None:
         model="actuation",
         manager=ManagerOptions(grace_period=0.0, request_timeout=16.0, recovery_attempts=1, recovery=False),
         sim=SimOptions(transition_delay=1.0, slow=(("drive_base", 3.4), ("manipulator", 3.6))),
-        steps=(Step(1.0, ChangeTo(part="actuation", target="active.MODERATE")),),
+        steps=(Scheduled(1.0, ChangeTo(part="actuation", target="active.MODERATE")),),
         final=ChangeTo(part="manipulator", target="active.STRONG"),
         final_delay=0.01,
     ))
@@ -283,8 +283,8 @@ def test_a_node_whose_move_by_itself_is_reported_late_is_taken_back_to_its_goal(
         manager=ManagerOptions(grace_period=0.5, recovery=False),
         sim=SimOptions(report_delay=0.03, slow=(("laser_resender", 1.1),)),
         steps=(
-            Step(0.0, ChangeMode(part="pilot", mode="f_normal_mode")),
-            Step(10.0, Trigger(node="laser_resender")),
+            Scheduled(0.0, ChangeMode(part="pilot", mode="f_normal_mode")),
+            Scheduled(10.0, Trigger(node="laser_resender")),
         ),
         final=ChangeMode(part="pilot", mode="f_performance_mode"),
         final_delay=0.01,
@@ -300,8 +300,8 @@ def test_a_refusal_answered_after_the_nodes_appearance_is_not_waited_on() -> Non
         manager=ManagerOptions(grace_period=0.5, request_timeout=9.0, recovery=False),
         sim=SimOptions(transition_delay=0.0, parameter_delay=0.0, report_delay=0.005),
         steps=(
-            Step(0.0, Restart(node="amcl", state="active")),
-            Step(0.0, ChangeState(part="pilot", transition="configure")),
+            Scheduled(0.0, Restart(node="amcl", state="active")),
+            Scheduled(0.0, ChangeState(part="pilot", transition="configure")),
         ),
         final=ChangeMode(part="pilot", mode="f_slow_mode"),
         final_delay=0.01,
@@ -316,7 +316,7 @@ def test_a_finalized_node_restarted_at_the_instant_of_a_request_may_be_refused_f
         model="actuation",
         manager=ManagerOptions(grace_period=0.5, recovery=False),
         sim=SimOptions(initial_state=(("manipulator", "finalized"),), report_delay=0.03),
-        steps=(Step(1.0, Crash(node="manipulator")),),
+        steps=(Scheduled(1.0, Crash(node="manipulator")),),
         final=ChangeMode(part="manipulator", mode="__DEFAULT__"),
         final_delay=0.0,
     ))
@@ -333,9 +333,9 @@ def test_a_budget_renewed_by_a_restart_counts_from_when_the_manager_learns_of_it
                        initial_state=(("laser_resender", "inactive"), ("amcl", "unconfigured")),
                        late=(("controller_server", 1.9),), report_delay=0.005),
         steps=(
-            Step(0.05, Restart(node="laser_resender", state="active")),
-            Step(0.05, ChangeMode(part="pilot", mode="f_performance_mode")),
-            Step(0.05, Restart(node="laser_resender")),
+            Scheduled(0.05, Restart(node="laser_resender", state="active")),
+            Scheduled(0.05, ChangeMode(part="pilot", mode="f_performance_mode")),
+            Scheduled(0.05, Restart(node="laser_resender")),
         ),
         final=ChangeMode(part="controller_server", mode="FAST"),
         final_delay=0.1,
@@ -354,15 +354,15 @@ def test_a_hung_node_restarted_by_the_healing_renews_its_budget_before_the_manag
                        initial_state=(("amcl", "inactive"),), late=(("laser_resender", 5.2), ("amcl", 6.1)),
                        slow=(("controller_server", 3.7),), report_delay=0.005),
         steps=(
-            Step(30.0, ChangeMode(part="pilot", mode="__DEFAULT__")),
-            Step(67.0, Restart(node="controller_server", state="active")),
-            Step(67.0, RejectParameters(node="controller_server", reason=None)),
-            Step(67.025, ChangeState(part="laser_resender", transition="bogus")),
-            Step(67.025, ChangeState(part="pilot", transition="activate")),
-            Step(77.025, ChangeTo(part="amcl", target="active.__DEFAULT__", timeout=2.9)),
-            Step(77.025, HangNext(node="amcl", transition="activate")),
-            Step(77.025, ChangeTo(part="controller_server", target="active")),
-            Step(88.025, Trigger(node="amcl", outcome="failure", on_error="failure")),
+            Scheduled(30.0, ChangeMode(part="pilot", mode="__DEFAULT__")),
+            Scheduled(67.0, Restart(node="controller_server", state="active")),
+            Scheduled(67.0, RejectParameters(node="controller_server", reason=None)),
+            Scheduled(67.025, ChangeState(part="laser_resender", transition="bogus")),
+            Scheduled(67.025, ChangeState(part="pilot", transition="activate")),
+            Scheduled(77.025, ChangeTo(part="amcl", target="active.__DEFAULT__", timeout=2.9)),
+            Scheduled(77.025, HangNext(node="amcl", transition="activate")),
+            Scheduled(77.025, ChangeTo(part="controller_server", target="active")),
+            Scheduled(88.025, Trigger(node="amcl", outcome="failure", on_error="failure")),
         ),
         final=ChangeTo(part="controller_server", target="active.DEGRADED"),
         final_delay=0.1,
@@ -678,8 +678,8 @@ n1:
         manager=ManagerOptions(grace_period=0.0, request_timeout=2.0, recovery=False),
         sim=SimOptions(),
         steps=(
-            Step(0.0, ChangeMode(part='s0', mode='__DEFAULT__')),
-            Step(0.5, Trigger(node='n0', choice=1)),
+            Scheduled(0.0, ChangeMode(part='s0', mode='__DEFAULT__')),
+            Scheduled(0.5, Trigger(node='n0', choice=1)),
         ),
         final=ChangeTo(part='s2', target='active'),
     ))
@@ -697,7 +697,7 @@ def test_a_node_restarted_from_finalized_at_the_instant_of_a_request_may_fail_it
                        initial_state=(("pointcloud_to_laser", "finalized"), ("amcl", "unconfigured"),
                                       ("controller_server", "unconfigured")),
                        late=(("laser_resender", 5.5),), plain=("laser_resender",), report_delay=0.03),
-        steps=(Step(0.02, RejectParameters(node="amcl", reason="rejected by the test")),),
+        steps=(Scheduled(0.02, RejectParameters(node="amcl", reason="rejected by the test")),),
         final=ChangeMode(part="pilot", mode="f_degraded_mode"),
         final_delay=0.0,
     ))
@@ -712,7 +712,7 @@ def test_a_request_confirmed_from_what_the_manager_knows_before_late_news_is_a_s
         model="pilot",
         manager=ManagerOptions(rules=False, recovery=False),
         sim=SimOptions(transition_delay=0.01, report_delay=0.03, initial_state=(("amcl", "active"),)),
-        steps=(Step(1.0, Trigger(node="amcl", choice=1, outcome="failure")),),
+        steps=(Scheduled(1.0, Trigger(node="amcl", choice=1, outcome="failure")),),
         final=ChangeTo(part="amcl", target="active.__DEFAULT__"),
         final_delay=0.01,
     ))
@@ -731,16 +731,16 @@ def test_a_continuation_succeeds_only_once_the_nodes_it_carries_on_with_are_at_t
                        initial_state=(("amcl", "active"), ("controller_server", "active")),
                        late=(("amcl", 8.5), ("pointcloud_to_laser", 4.8))),
         steps=(
-            Step(0.02, Trigger(node="amcl", choice=1, outcome="failure")),
-            Step(0.03, Trigger(node="amcl", outcome="failure")),
-            Step(0.13, Restart(node="laser_resender", state="inactive")),
-            Step(35.13, Crash(node="laser_resender")),
-            Step(35.13, Crash(node="amcl")),
-            Step(35.14, ChangeMode(part="pilot", mode="f_performance_mode")),
-            Step(35.14, ChangeState(part="pilot", transition="activate")),
-            Step(35.14, ChangeMode(part="controller_server", mode="__DEFAULT__")),
-            Step(35.15, HangNext(node="amcl", transition="activate")),
-            Step(35.15, ChangeMode(part="laser_resender", mode="__DEFAULT__")),
+            Scheduled(0.02, Trigger(node="amcl", choice=1, outcome="failure")),
+            Scheduled(0.03, Trigger(node="amcl", outcome="failure")),
+            Scheduled(0.13, Restart(node="laser_resender", state="inactive")),
+            Scheduled(35.13, Crash(node="laser_resender")),
+            Scheduled(35.13, Crash(node="amcl")),
+            Scheduled(35.14, ChangeMode(part="pilot", mode="f_performance_mode")),
+            Scheduled(35.14, ChangeState(part="pilot", transition="activate")),
+            Scheduled(35.14, ChangeMode(part="controller_server", mode="__DEFAULT__")),
+            Scheduled(35.15, HangNext(node="amcl", transition="activate")),
+            Scheduled(35.15, ChangeMode(part="laser_resender", mode="__DEFAULT__")),
         ),
         final=ChangeMode(part="laser_resender", mode="__DEFAULT__"),
         final_delay=0.01,
@@ -759,10 +759,10 @@ def test_a_held_mode_whose_previous_target_was_finalized_is_not_put_back() -> No
                        late=(("pointcloud_to_laser", 6.6), ("controller_server", 3.9)), plain=("laser_resender",),
                        slow=(("pointcloud_to_laser", 0.7), ("controller_server", 4.5))),
         steps=(
-            Step(0.0, ChangeState(part="pilot", transition="shutdown")),
-            Step(0.0, ChangeMode(part="laser_resender", mode="TYPO")),
-            Step(16.0, ChangeMode(part="amcl", mode="TYPO", timeout=13.0)),
-            Step(51.0, ChangeMode(part="pointcloud_to_laser", mode="__DEFAULT__")),
+            Scheduled(0.0, ChangeState(part="pilot", transition="shutdown")),
+            Scheduled(0.0, ChangeMode(part="laser_resender", mode="TYPO")),
+            Scheduled(16.0, ChangeMode(part="amcl", mode="TYPO", timeout=13.0)),
+            Scheduled(51.0, ChangeMode(part="pointcloud_to_laser", mode="__DEFAULT__")),
         ),
         tree=(
             (TreeItem(kind="wait_for_mode", part="controller_server", arg="__DEFAULT__", timeout=0.5, ticks=0),
@@ -790,11 +790,11 @@ def test_a_final_request_made_before_the_news_of_a_restart_may_fail_naming_the_n
         sim=SimOptions(transition_delay=0.0, error_delay=0.0, vanish_after=0.5,
                        slow=(("bt_navigator", 2.6), ("controller_server", 1.5)), report_delay=0.03),
         steps=(
-            Step(0.0, Trigger(node="controller_server", choice=1, outcome="failure")),
-            Step(0.0, Crash(node="planner_server")),
-            Step(0.05, ChangeTo(part="navigation", target="active.f_normal_mode")),
-            Step(0.05, ChangeMode(part="navigation", mode="f_performance_mode")),
-            Step(0.05, ChangeMode(part="planner_server", mode="ASTAR")),
+            Scheduled(0.0, Trigger(node="controller_server", choice=1, outcome="failure")),
+            Scheduled(0.0, Crash(node="planner_server")),
+            Scheduled(0.05, ChangeTo(part="navigation", target="active.f_normal_mode")),
+            Scheduled(0.05, ChangeMode(part="navigation", mode="f_performance_mode")),
+            Scheduled(0.05, ChangeMode(part="planner_server", mode="ASTAR")),
         ),
         tree=((TreeItem(kind="wait_for_mode", part="navigation", arg="f_normal_mode", timeout=0.5),),),
         final=ChangeMode(part="navigation", mode="f_energy_saving_mode"),

@@ -189,7 +189,7 @@ def beyond_reference(model: Model, argv: Sequence[str]) -> bool:
 
 
 @dataclass(frozen=True)
-class Step:
+class CliStep:
     """A command to run: a README example, or (``example`` ``None``) a step of the bring-up."""
 
     argv: tuple[str, ...]
@@ -199,7 +199,7 @@ class Step:
         return str(self.example) if self.example else f"(bring-up) {shlex.join(('sm-bt', *self.argv))}"
 
 
-def plan(model: Model, examples: Sequence[Example]) -> list[Step]:
+def plan(model: Model, examples: Sequence[Example]) -> list[CliStep]:
     """The order the examples of one model run in: the bring-up of every system they name (a README
     line that is a bring-up step runs as that step), then the state commands, then the others in
     README order (a transcript in one piece), those the reference cannot confirm last."""
@@ -211,7 +211,7 @@ def plan(model: Model, examples: Sequence[Example]) -> list[Step]:
             units.append([example])
     systems = list(dict.fromkeys(parse(example.argv).part.lstrip("/") for example in examples
                                  if isinstance(model.parts.get(parse(example.argv).part.lstrip("/")), SystemPart)))
-    steps: list[Step] = []
+    steps: list[CliStep] = []
     for system in systems:
         for transition in BRING_UP:
             argv = ("state", "set", system, transition, "--wait")
@@ -219,12 +219,12 @@ def plan(model: Model, examples: Sequence[Example]) -> list[Step]:
                            and unit[0].argv == argv), None)
             if readme is not None:
                 units.remove(readme)
-            steps.append(Step(argv, readme[0] if readme else None))
+            steps.append(CliStep(argv, readme[0] if readme else None))
     states = [unit for unit in units if all(example.argv[0] == "state" for example in unit)]
     beyond = [unit for unit in units if any(beyond_reference(model, example.argv) for example in unit)]
     others = [unit for unit in units if unit not in states and unit not in beyond]
     for unit in [*states, *others, *beyond]:
-        steps.extend(Step(example.argv, example) for example in unit)
+        steps.extend(CliStep(example.argv, example) for example in unit)
     return steps
 
 
@@ -260,7 +260,7 @@ class Running:
     def log(self) -> str:
         return "\n".join(self.reference.stderr.splitlines()[-LOG_TAIL:])
 
-    def run(self, step: Step) -> tuple[int, str, str]:
+    def run(self, step: CliStep) -> tuple[int, str, str]:
         """Run ``step`` as ``sm-bt`` would and check what it printed; (exit code, stdout, stderr)."""
         argv = list(step.argv)
         beyond = beyond_reference(self.model, argv)
@@ -454,7 +454,7 @@ def start_reference_fixture(node_processes: Starter, ros_context: RosContext, ca
 
 def bring_up(running: Running, system: str) -> None:
     for transition in BRING_UP:
-        running.run(Step(("state", "set", system, transition, "--wait")))
+        running.run(CliStep(("state", "set", system, transition, "--wait")))
 
 
 # -- the tests -----------------------------------------------------------------------------------------
@@ -493,7 +493,7 @@ def test_every_readme_example_does_against_the_reference_what_the_readme_says(
 def test_state_set_takes_a_node_through_every_transition_by_its_own_service_next_to_the_reference(
         start_reference: Callable[[str], Running]) -> None:
     running = start_reference("pilot")
-    outputs = [running.run(Step(("state", "set", "controller_server", transition, "--wait")))[1]
+    outputs = [running.run(CliStep(("state", "set", "controller_server", transition, "--wait")))[1]
                for transition in REQUESTABLE_LABELS]
     # Each line says the state the node's own get_state answers once the transition is done.
     assert [output.split()[1] for output in outputs] == ["inactive", "active", "inactive", "unconfigured",
@@ -506,12 +506,12 @@ def test_a_system_deactivated_and_activated_through_the_reference_is_active_agai
         start_reference: Callable[[str], Running]) -> None:
     running = start_reference("pilot")
     bring_up(running, "pilot")
-    running.run(Step(("mode", "set", "pilot", "f_normal_mode", "--wait")))  # amcl and others active
-    running.run(Step(("state", "set", "pilot", "deactivate", "--wait")))
-    assert running.run(Step(("state", "get", "amcl")))[1] == "amcl: inactive\n"  # the node itself went down
-    running.run(Step(("state", "set", "pilot", "activate", "--wait")))
-    assert running.run(Step(("state", "get", "pilot")))[1] == "pilot: active\n"
-    assert running.run(Step(("mode", "get", "pilot")))[1] == "pilot: __DEFAULT__\n"
+    running.run(CliStep(("mode", "set", "pilot", "f_normal_mode", "--wait")))  # amcl and others active
+    running.run(CliStep(("state", "set", "pilot", "deactivate", "--wait")))
+    assert running.run(CliStep(("state", "get", "amcl")))[1] == "amcl: inactive\n"  # the node itself went down
+    running.run(CliStep(("state", "set", "pilot", "activate", "--wait")))
+    assert running.run(CliStep(("state", "get", "pilot")))[1] == "pilot: active\n"
+    assert running.run(CliStep(("mode", "get", "pilot")))[1] == "pilot: __DEFAULT__\n"
 
 
 def test_a_node_mode_set_through_the_reference_is_confirmed_and_applied_to_the_node(
@@ -521,11 +521,11 @@ def test_a_node_mode_set_through_the_reference_is_confirmed_and_applied_to_the_n
 
     running = start_reference("pilot")
     bring_up(running, "pilot")
-    running.run(Step(("mode", "set", "pilot", "f_normal_mode", "--wait")))  # controller_server active
-    running.run(Step(("mode", "set", "controller_server", "FAST", "--wait")))
+    running.run(CliStep(("mode", "set", "pilot", "f_normal_mode", "--wait")))  # controller_server active
+    running.run(CliStep(("mode", "set", "controller_server", "FAST", "--wait")))
     assert any("changing mode of controller_server to FAST" in line
                for line in running.reference.stderr.splitlines()), running.log()
-    assert running.run(Step(("mode", "get", "controller_server")))[1] == "controller_server: FAST\n"
+    assert running.run(CliStep(("mode", "get", "controller_server")))[1] == "controller_server: FAST\n"
     controller = running.model.parts["controller_server"]
     assert isinstance(controller, NodePart)
     wanted: dict[str, Any] = controller.modes["FAST"].values()

@@ -2,7 +2,7 @@
 
 A :class:`Scenario` is plain, printable data: a model (a fixed one by name, or generated YAML
 text), manager options, simulated-backend options (delays, initial states, late joins, plain
-nodes, slow nodes), timed :class:`Step` s (requests, cancellations, faults), an optional small
+nodes, slow nodes), timed :class:`Scheduled` s (requests, cancellations, faults), an optional small
 py_trees tree of sm_bt behaviours, and a final user request. :func:`run` plays it on the virtual
 clock, event by event (never in small fixed steps, so a scenario costs milliseconds), then
 *heals* the world (faults disarmed, rejections cleared, crashed, vanished, hung and not-started
@@ -178,7 +178,7 @@ MOVERS = (Trigger, SetParameter, Crash, Restart)
 
 
 @dataclass(frozen=True)
-class Step:
+class Scheduled:
     at: float
     action: Action
 
@@ -229,7 +229,7 @@ class Scenario:
     final: ChangeMode | ChangeTo
     manager: ManagerOptions = ManagerOptions()
     sim: SimOptions = SimOptions()
-    steps: tuple[Step, ...] = ()
+    steps: tuple[Scheduled, ...] = ()
     tree: tuple[tuple[TreeItem, ...], ...] = ()
     #: When the final request comes after healing: None once the manager settled, else that many
     #: seconds after the last step (0: the same instant, with everything still under way).
@@ -252,7 +252,7 @@ class Scenario:
         lines.append(f"    sim={_short_repr(self.sim)},")
         if self.steps:
             lines.append("    steps=(")
-            lines += [f"        Step({s.at!r}, {_short_repr(s.action)})," for s in self.steps]
+            lines += [f"        Scheduled({s.at!r}, {_short_repr(s.action)})," for s in self.steps]
             lines.append("    ),")
         if self.tree:
             lines.append("    tree=(")
@@ -1051,10 +1051,10 @@ def cascade_scenarios(draw: st.DrawFn) -> Scenario:
     rules = {rule.name: rule for system in model.systems for rule in system.rules}
     parent, sub = rules["cascade_parent"], rules["cascade_sub"]
     nodes = [n.name for n in model.nodes]
-    steps = [Step(0.0, ChangeMode(parent.system, parent.if_target.mode or DEFAULT_MODE))]
+    steps = [Scheduled(0.0, ChangeMode(parent.system, parent.if_target.mode or DEFAULT_MODE))]
     at = draw(_TENTHS[5, 50])
     for node in [sub.if_part, *subset(draw, nodes, max_size=2)]:
-        steps.append(Step(at, Trigger(node, draw(ints(0, 2)), pick(draw, ["success", "error", "failure"]))))
+        steps.append(Scheduled(at, Trigger(node, draw(ints(0, 2)), pick(draw, ["success", "error", "failure"]))))
         at = round(at + draw(_DELAYS), 3)
     manager = ManagerOptions(grace_period=pick(draw, [0.0, 0.1, 0.5, 1.0]), request_timeout=float(draw(ints(2, 20))),
                              recovery_attempts=draw(ints(1, 3)), recovery=draw(st.booleans()))
@@ -1074,8 +1074,8 @@ def hung_scenarios(draw: st.DrawFn, models: st.SearchStrategy[tuple[str, str | N
     manager = ManagerOptions(grace_period=pick(draw, [0.0, 0.5, 2.0]), request_timeout=float(draw(ints(2, 30))),
                              recovery_attempts=draw(ints(1, 3)), recovery_window=pick(draw, [60.0, 5.0, 30.0]),
                              rules=False, recovery=True)
-    steps = (Step(0.0, HangNext(node, transition)), Step(0.0, ChangeTo(node, "active")),
-             Step(round(give_up_bound(manager), 3), RejectParameters(node, None)))
+    steps = (Scheduled(0.0, HangNext(node, transition)), Scheduled(0.0, ChangeTo(node, "active")),
+             Scheduled(round(give_up_bound(manager), 3), RejectParameters(node, None)))
     final = draw(_request(model, valid=True))
     assert isinstance(final, (ChangeMode, ChangeTo))
     return Scenario(name, final, manager, SimOptions(), steps, expect_given_up=node, model_text=text)
@@ -1190,7 +1190,7 @@ def scenarios(draw: st.DrawFn, models: st.SearchStrategy[tuple[str, str | None]]
             action = draw(_fault(model, movers))
         else:
             action = Cancel(draw(ints(0, 5)))
-        steps.append(Step(at, action))
+        steps.append(Scheduled(at, action))
     final = draw(_request(model, valid=True))
     assert isinstance(final, (ChangeMode, ChangeTo))
     final_delay = pick(draw, [None, 0.0, 0.01, 0.025, 0.1, 1.0])
