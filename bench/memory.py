@@ -1,7 +1,7 @@
-"""P5: memory of the loaded model, and of model + manager + simulated backend, over the baseline.
+"""P5: memory of the loaded model, and of model + manager + simulated backend, over what the process held before.
 
 Each N runs in a fresh interpreter (``python -m bench.memory N``), so that nothing measured before
-is counted: the baseline is its resident set (VmRSS) once everything is imported and the model
+is counted: the starting point is its resident set (VmRSS) once everything is imported and the model
 text is in memory; the model's figure is after loading it (text dropped, garbage collected), the
 manager's after building a manager and a simulated backend over it.
 """
@@ -37,7 +37,7 @@ def child(nodes: int) -> dict[str, float]:
 
     text = model_text(nodes)
     gc.collect()
-    baseline = resident_mb()
+    start = resident_mb()
     model = load_model_text(text, "generated.yaml")
     del text
     gc.collect()
@@ -46,7 +46,7 @@ def child(nodes: int) -> dict[str, float]:
     gc.collect()
     built = resident_mb()
     assert system.manager.model is model
-    return {"baseline": baseline, "model": loaded - baseline, "model_and_manager": built - baseline}
+    return {"start": start, "model": loaded - start, "model_and_manager": built - start}
 
 
 def run(quick: bool) -> list[Figure]:
@@ -57,7 +57,7 @@ def run(quick: bool) -> list[Figure]:
         if done.returncode != 0:
             raise RuntimeError(f"memory child for N={nodes} failed: {done.stderr.strip().splitlines()[-1:]}")
         got = json.loads(done.stdout)
-        details = {"N": nodes, "baseline_mb": round(got["baseline"], 1), "unit": "VmRSS, MB = 2^20 bytes"}
+        details = {"N": nodes, "start_mb": round(got["start"], 1), "unit": "VmRSS, MB = 2^20 bytes"}
         figures.append(Figure("P5", f"model, N={nodes}", got["model"], "MB", details=details))
         figures.append(Figure("P5", f"model + manager + sim backend, N={nodes}", got["model_and_manager"], "MB",
                               GOALS_MB.get(nodes), details=details))

@@ -1,11 +1,11 @@
 """P4: what sm_bt behaviours add to a tick, against plain py_trees leaves in the same tree shape.
 
-Each tree has 50 leaves under one composite. The floor is ``py_trees.behaviours.Success`` (a leaf
+Each tree has 50 leaves under one composite. The baseline is ``py_trees.behaviours.Success`` (a leaf
 whose update only returns SUCCESS); the sm_bt trees hold condition behaviours that hold (a
 ``ModeIs``/``WaitForMode`` per node of a 50-node model, every node active in its default mode),
 so every leaf is ticked on every tick. The root is ticked with ``tick_once()``, without the
 ``BehaviourTree`` wrapper's visitors, so the ratio is the behaviours' own cost at its sharpest.
-Floor and sm_bt trees alternate in the same process; the figure is the ratio of their best
+Baseline and sm_bt trees alternate in the same process; the figure is the ratio of their best
 (minimum) times over several repeats, gc disabled while timing.
 """
 
@@ -86,18 +86,18 @@ def run(quick: bool) -> list[Figure]:
              ("Sequence of 50 satisfied WaitForMode", sequence, wait_for))
     figures = []
     for label, composite, leaf in cases:
-        floor_tree = _tree(composite, plain, nodes, manager)
+        baseline_tree = _tree(composite, plain, nodes, manager)
         sm_tree = _tree(composite, leaf, nodes, manager)
-        floor_tree.tick_once()
+        baseline_tree.tick_once()
         sm_tree.tick_once()
         if sm_tree.status is not py_trees.common.Status.SUCCESS:
             raise RuntimeError(f"{label}: the sm_bt tree is {sm_tree.status.value}, not SUCCESS: "
                                f"{[b.feedback_message for b in sm_tree.iterate() if b.feedback_message][:1]}")
-        floor = sm = float("inf")
+        baseline = sm = float("inf")
         for _ in range(3):  # alternate, so that both see the same machine
-            floor = min(floor, _best(floor_tree, ticks, repeats))
+            baseline = min(baseline, _best(baseline_tree, ticks, repeats))
             sm = min(sm, _best(sm_tree, ticks, repeats))
-        figures.append(Figure("P4", f"tick of a {label} / plain leaves", sm / floor, "x", GOAL,
-                              details={"sm_bt_us": round(sm * 1e6, 1), "floor_us": round(floor * 1e6, 1),
-                                       "floor": "py_trees.behaviours.Success", "ticked": "root.tick_once()"}))
+        figures.append(Figure("P4", f"tick of a {label} / plain leaves", sm / baseline, "x", GOAL,
+                              details={"sm_bt_us": round(sm * 1e6, 1), "baseline_us": round(baseline * 1e6, 1),
+                                       "baseline": "py_trees.behaviours.Success", "ticked": "root.tick_once()"}))
     return figures

@@ -59,13 +59,13 @@ def test_a_failing_module_is_a_failed_row_and_the_others_still_run(tmp_path: Pat
 
 
 @pytest.mark.ros
-def test_the_floor_reads_the_stamp_of_a_serialized_parameter_event() -> None:
-    """The ROS module's floor reads only the stamp (and, with sm_bt.ros.cdr, the node's name) of each
+def test_the_baseline_reads_the_stamp_of_a_serialized_parameter_event() -> None:
+    """The ROS module's baseline reads only the stamp (and, with sm_bt.ros.cdr, the node's name) of each
     /parameter_events message."""
     from rcl_interfaces.msg import Parameter, ParameterEvent
     from rclpy.serialization import serialize_message
 
-    from bench.ros import _event_stamp
+    from bench.ros_baseline import _event_stamp
 
     for name, sec in (("/bench_n17", 1_700_000_000), ("/a", 0), ("/ns/" + "x" * 300, -5)):
         message = ParameterEvent(node=name, changed_parameters=[Parameter(name="speed")])
