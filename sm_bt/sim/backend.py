@@ -29,59 +29,25 @@ The backend is single-threaded: drive it from the thread that advances the clock
 
 from __future__ import annotations
 
-import enum
 import functools
-import math
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
-from sm_bt.engine.clock import TimerHandle, VirtualClock
+from sm_bt.engine.clock import VirtualClock
 from sm_bt.engine.lifecycle import REQUESTABLE, Outcome, Transition
-from sm_bt.model.states import PRIMARY_STATES, State
+from sm_bt.model.states import State
 from sm_bt.model.types import Model, ParamValue
+from sm_bt.sim.events import NodeStatus, SimEvent, SimEventKind, format_values
+from sm_bt.sim.faults import ArmedFaults, Failure
 from sm_bt.sim.node import ParameterRejected, SimNode, TransitionEvent, TransitionRefused
+from sm_bt.sim.reports import Reports
+from sm_bt.sim.start import StartState, check_delay, check_names, initial_states, start_state
+from sm_bt.sim.timers import ProcessTimers
 
-_REQUESTABLE = frozenset(step.transition for step in REQUESTABLE)
-#: The states a node process can start in, in lifecycle order (for messages).
-_STARTABLE = tuple(s for s in State if s in PRIMARY_STATES)
+__all__ = ["NodeStatus", "SimBackend", "SimEvent", "SimEventKind", "StartState"]
 
-#: A state to start in: a :class:`State` or its label (``"active"``).
-StartState = State | str
-
-
-class NodeStatus(str, enum.Enum):
-    """Whether a simulated node's process runs and answers."""
-
-    NOT_STARTED = "not started"
-    RUNNING = "running"
-    CRASHED = "crashed"  # stopped answering, not yet reported vanished
-    VANISHED = "vanished"
-
-
-class SimEventKind(str, enum.Enum):
-    REQUEST = "request"  # a change_state / set_parameters call arrived at the backend
-    RESPONSE = "response"  # its done() was called
-    TRANSITION = "transition"  # a lifecycle TransitionEvent of the node
-    PARAMETERS = "parameters"  # parameter values changed (by a set or from outside)
-    FAULT = "fault"  # a fault was armed or took effect
-    STARTED = "started"  # a node process started (late start, restart)
-    VANISHED = "vanished"  # the backend reported the node gone
-
-
-@dataclass(frozen=True)
-class SimEvent:
-    """Something that happened in the simulation; ``details`` is a one-line human description."""
-
-    time: float
-    node: str
-    kind: SimEventKind
-    details: str
-    transition: TransitionEvent | None = None
-    parameters: Mapping[str, ParamValue] | None = None
-
-    def __str__(self) -> str:
-        return f"{self.time:8.3f}  {self.node:<20} {self.kind.value:<10} {self.details}"
+_REQUESTABLE = frozenset(edge.transition for edge in REQUESTABLE)
 
 
 @dataclass(eq=False)  # identity: two equal-looking calls are still two calls
@@ -90,15 +56,6 @@ class _PendingCall:
     label: str
     done: Done
     answered: bool = False
-
-
-@dataclass(frozen=True)
-class _Failure:
-    outcome: Outcome
-    on_error: Outcome
-
-
-_SUCCEEDS = _Failure(Outcome.SUCCESS, Outcome.SUCCESS)
 
 
 class _Callbacks:
@@ -145,25 +102,6 @@ class _Callbacks:
             self.backend._respond(self.call, _transition_result(self.node, self.transition, self.outcome, final))
 
 
-class _NodeTimer:
-    """``action``, scheduled on behalf of a node's process (its handle in ``timers`` until it runs)."""
-
-    __slots__ = ("action", "handle", "timers")
-
-    def __init__(self, timers: set[TimerHandle], action: Callable[[], None]) -> None:
-        self.timers = timers
-        self.action = action
-        self.handle: TimerHandle | None = None
-
-    def __call__(self) -> None:
-        self.timers.discard(self.handle)
-        self.action()
-
-
-def _format(values: Mapping[str, ParamValue]) -> str:
-    return "{" + ", ".join(f"{key}: {value!r}" for key, value in values.items()) + "}"
-
-
 class SimBackend:
     """Simulated lifecycle nodes for every node part of ``model``.
 
@@ -195,52 +133,31 @@ class SimBackend:
         for label, value in (("transition_delay", transition_delay), ("error_delay", error_delay),
                              ("parameter_delay", parameter_delay), ("vanish_after", vanish_after),
                              ("report_delay", report_delay)):
-            _check_delay(label, value)
+            check_delay(label, value)
         self._clock = clock if clock is not None else VirtualClock()
         self.transition_delay = transition_delay
         self.error_delay = error_delay
         self.parameter_delay = parameter_delay
         self.vanish_after = vanish_after
-        self.report_delay = report_delay
         #: Everything that happened, oldest first.
         self.events: list[SimEvent] = []
         self._history = history
 
         names = tuple(part.name for part in model.nodes)
         self._declared = {part.name: part.modes[part.default_mode].values() for part in model.nodes}
-        per_node = initial_state if isinstance(initial_state, Mapping) else {}
-        for label, mapping in (("initial_state", per_node), ("initial_parameters", initial_parameters or {}),
-                               ("late", late or {}), ("plain", dict.fromkeys(plain))):
-            unknown = sorted(set(mapping) - set(names))
-            if unknown:
-                raise ValueError(f"{label} names unknown nodes {unknown} (nodes: {', '.join(names)})")
+        check_names(names, initial_state=initial_state if isinstance(initial_state, Mapping) else {},
+                    initial_parameters=initial_parameters or {}, late=late or {}, plain=plain)
         self._plain = frozenset(plain)
-        common = State.UNCONFIGURED if isinstance(initial_state, Mapping) else \
-            _start_state(initial_state, "initial_state")
-        self._initial_state: dict[str, State] = {}
-        for name in names:
-            if name in per_node:
-                state = _start_state(per_node[name], f"initial_state of node {name}")
-                if name in self._plain and state is not State.ACTIVE:
-                    raise ValueError(f"initial_state of node {name}: it has no lifecycle services (parameters "
-                                     f"only), so it runs active, not {state}")
-            else:
-                state = State.ACTIVE if name in self._plain else common
-            self._initial_state[name] = state
+        self._initial_state = initial_states(names, initial_state, self._plain)
         self._initial_overrides = {name: dict((initial_parameters or {}).get(name, {})) for name in names}
 
         self._nodes: dict[str, SimNode] = {}
         self._status: dict[str, NodeStatus] = {}
         self._pending: dict[str, list[_PendingCall]] = {name: [] for name in names}
-        self._timers: dict[str, set[TimerHandle]] = {name: set() for name in names}
-        self._delays: dict[tuple[str, Transition | None], float] = {}
-        self._failures: dict[tuple[str, Transition], _Failure] = {}
-        self._hangs: set[tuple[str, Transition]] = set()
+        self._timers = ProcessTimers(self._clock)
+        self._armed = ArmedFaults()
         self._hung: set[str] = set()  # running nodes stuck in a transition that hangs
-        self._parameter_rejections: dict[str, str] = {}
-        self._listener: BackendListener | None = None
-        self._watched: set[str] = set()
-        self._visible: set[str] = set()  # watched nodes reported appeared (and not vanished since)
+        self._reports = Reports(self._clock, report_delay)
 
         for name in names:
             self._nodes[name] = self._spawn(name, self._initial_state[name])  # validates the initial values
@@ -249,6 +166,11 @@ class SimBackend:
             self.start_late(name, at)
 
     # -- inspection ---------------------------------------------------------------------------------
+
+    @property
+    def report_delay(self) -> float:
+        """Seconds between something happening and the listener hearing of it (see the module)."""
+        return self._reports.delay
 
     @property
     def clock(self) -> VirtualClock:
@@ -287,18 +209,14 @@ class SimBackend:
 
     def attach(self, nodes: Sequence[str], listener: BackendListener) -> None:
         """Report to ``listener`` about ``nodes``: running ones appear now, others when they start."""
-        self.detach()
-        self._listener = listener
-        self._watched = set(nodes)
+        self._reports.attach(nodes, listener)
         for name in dict.fromkeys(nodes):
             if self._status.get(name) is NodeStatus.RUNNING:
                 self._appear(name)
 
     def detach(self) -> None:
         """Stop all listener reports. Calls in flight still get their ``done``."""
-        self._listener = None
-        self._watched = set()
-        self._visible = set()
+        self._reports.detach()
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
         call = _PendingCall(node, transition.label, done)
@@ -309,7 +227,7 @@ class SimBackend:
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         values = dict(parameters)
         call = _PendingCall(node, "set_parameters", done)
-        self._record(node, SimEventKind.REQUEST, f"set_parameters {_format(values)}", parameters=values)
+        self._record(node, SimEventKind.REQUEST, f"set_parameters {format_values(values)}", parameters=values)
         if self._accept(call):
             self._after(node, self.parameter_delay, lambda: self._deliver_parameters(call, values))
 
@@ -319,10 +237,10 @@ class SimBackend:
         """How long ``node``'s callback for ``transition`` runs; with ``None``, every callback of the
         node (``on_error`` included) that has no per-transition delay."""
         self._require(node)
-        _check_delay("delay", seconds)
+        check_delay("delay", seconds)
         if transition is not None:
             self._require_requestable(transition)
-        self._delays[(node, transition)] = seconds
+        self._armed.set_delay(node, seconds, transition)
 
     def fail_next(self, node: str, transition: Transition, outcome: Outcome = Outcome.FAILURE,
                   on_error: Outcome = Outcome.SUCCESS) -> None:
@@ -333,7 +251,7 @@ class SimBackend:
         self._require_requestable(transition)
         if outcome is Outcome.SUCCESS:
             raise ValueError("fail_next needs Outcome.FAILURE or Outcome.ERROR")
-        self._failures[(node, transition)] = _Failure(outcome, on_error)
+        self._armed.fail_next(node, transition, Failure(outcome, on_error))
         self._record(node, SimEventKind.FAULT, f"armed: next on_{transition.label} returns {outcome.name}")
 
     def hang_next(self, node: str, transition: Transition) -> None:
@@ -341,18 +259,17 @@ class SimBackend:
         no response comes until the node crashes (then vanishes) or restarts."""
         self._require_lifecycle(node, "hang a transition of")
         self._require_requestable(transition)
-        self._hangs.add((node, transition))
+        self._armed.hang_next(node, transition)
         self._record(node, SimEventKind.FAULT, f"armed: next {transition.label} hangs")
 
     def reject_parameters(self, node: str, reason: str | None) -> None:
         """While set, every ``set_parameters`` on ``node`` fails with ``reason`` and changes nothing;
         ``None`` clears it."""
         self._require(node)
+        self._armed.reject_parameters(node, reason)
         if reason is None:
-            self._parameter_rejections.pop(node, None)
             self._record(node, SimEventKind.FAULT, "cleared: parameter sets accepted again")
         else:
-            self._parameter_rejections[node] = reason
             self._record(node, SimEventKind.FAULT, f"armed: parameter sets rejected ({reason})")
 
     def set_parameter(self, node: str, name: str, value: ParamValue) -> None:
@@ -415,16 +332,16 @@ class SimBackend:
         self._require(node)
         plain = node in self._plain
         default = State.ACTIVE if plain else State.UNCONFIGURED
-        start = default if state is None else _start_state(state, f"cannot restart node {node}:")
+        start = default if state is None else start_state(state, f"cannot restart node {node}:")
         if plain and start is not State.ACTIVE:
             raise ValueError(f"cannot restart node {node} in {start}: it has no lifecycle services (parameters "
                              "only), so it runs active")
         stale = self._stop(node)
-        if unnoticed and node in self._visible:
+        if unnoticed and self._reports.visible(node):
             self._nodes[node] = self._spawn(node, start)
             self._status[node] = NodeStatus.RUNNING
             self._record(node, SimEventKind.STARTED, f"restarted in {start}, unnoticed")
-            self._report(lambda listener: listener.node_state(node, start))
+            self._reports.state(node, start)
         else:
             self._start(node, start, f"restarted in {start}")
         self._fail(stale, f"node {node} restarted")
@@ -436,19 +353,14 @@ class SimBackend:
         nodes = self.nodes if node is None else (node,)
         for name in nodes:
             self._require(name)
-            armed = [key for key in self._failures if key[0] == name] + [key for key in self._hangs if key[0] == name]
-            for key in armed:
-                self._failures.pop(key, None)
-                self._hangs.discard(key)
-            if armed or name in self._parameter_rejections:
-                self._parameter_rejections.pop(name, None)
+            if self._armed.clear(name):
                 self._record(name, SimEventKind.FAULT, "cleared: armed faults disarmed")
 
     def start_late(self, node: str, at: float) -> None:
         """``node`` is not running until virtual time ``at``; then it starts in its initial state and
         appears. Not for a node already reported to a listener (use :meth:`crash`/:meth:`restart`)."""
         self._require(node)
-        if node in self._visible:
+        if self._reports.visible(node):
             raise ValueError(f"node {node} was already reported running; use crash() and restart()")
         stale = self._stop(node)
         self._status[node] = NodeStatus.NOT_STARTED
@@ -484,19 +396,18 @@ class SimBackend:
             self._respond(call, CallResult(False, f"{transition.label} of {node} refused: {error}", refused=True))
             return
         self._moved(node, event)
-        if (node, transition) in self._hangs:
-            self._hangs.discard((node, transition))
+        if self._armed.take_hang(node, transition):
             self._hung.add(node)
             self._record(node, SimEventKind.FAULT, f"{transition.label} hangs in {event.goal}: no response")
             return
-        failure = self._failures.pop((node, transition), _SUCCEEDS)
+        failure = self._armed.take_failure(node, transition)
         if failure.outcome is not Outcome.SUCCESS:
             self._record(node, SimEventKind.FAULT, f"on_{transition.label} will return {failure.outcome.name}")
         _Callbacks(self, node, transition, failure.outcome, failure.on_error, call).start()
 
     def _deliver_parameters(self, call: _PendingCall, values: dict[str, ParamValue]) -> None:
         node = call.node
-        rejection = self._parameter_rejections.get(node)
+        rejection = self._armed.rejection(node)
         if rejection is not None:
             self._respond(call, CallResult(False, rejection))
             return
@@ -534,7 +445,7 @@ class SimBackend:
         self._nodes[node] = self._spawn(node, state)
         self._status[node] = NodeStatus.RUNNING
         self._record(node, SimEventKind.STARTED, details)
-        if node in self._watched:
+        if self._reports.watched(node):
             self._appear(node)
 
     def _stop(self, node: str) -> list[_PendingCall]:
@@ -554,9 +465,7 @@ class SimBackend:
         self._status[node] = NodeStatus.VANISHED
         reason = why if why is not None else f"no answer for {float(self.vanish_after)} s (crashed?)"
         self._record(node, SimEventKind.VANISHED, reason)
-        if node in self._visible and self._listener is not None:
-            self._visible.discard(node)
-            self._report(lambda listener: listener.node_vanished(node, reason))
+        self._reports.vanished(node, reason)
         self._fail_pending(node, f"node {node} vanished")
 
     def _fail_pending(self, node: str, reason: str) -> None:
@@ -566,39 +475,16 @@ class SimBackend:
     # -- reporting and bookkeeping ------------------------------------------------------------------
 
     def _appear(self, node: str) -> None:
-        if self._listener is None:
-            return
         sim = self._nodes[node]
-        self._visible.add(node)
-        report = NodeReport(sim.state, sim.parameters, lifecycle=sim.lifecycle)
-        self._report(lambda listener: listener.node_appeared(node, report))
+        self._reports.appeared(node, NodeReport(sim.state, sim.parameters, lifecycle=sim.lifecycle))
 
     def _moved(self, node: str, event: TransitionEvent) -> None:
         self._record(node, SimEventKind.TRANSITION, str(event), transition=event)
-        if node in self._visible and self._listener is not None:
-            self._report(lambda listener: listener.node_state(node, event.goal))
+        self._reports.state(node, event.goal)
 
     def _parameters_changed(self, node: str, values: Mapping[str, ParamValue]) -> None:
-        self._record(node, SimEventKind.PARAMETERS, _format(values), parameters=dict(values))
-        if values and node in self._visible and self._listener is not None:
-            changed = dict(values)
-            self._report(lambda listener: listener.node_parameters(node, changed))
-
-    def _report(self, deliver: Callable[[BackendListener], None]) -> None:
-        """Tell the listener now, or ``report_delay`` later (in order: equal delays run FIFO); a
-        report still on its way when the listener detaches is dropped."""
-        listener = self._listener
-        if listener is None:
-            return
-        if self.report_delay == 0:
-            deliver(listener)
-            return
-
-        def later() -> None:
-            if self._listener is listener:
-                deliver(listener)
-
-        self._clock.call_later(self.report_delay, later)
+        self._record(node, SimEventKind.PARAMETERS, format_values(values), parameters=dict(values))
+        self._reports.parameters(node, values)
 
     def _record(self, node: str, kind: SimEventKind, details: str, *, transition: TransitionEvent | None = None,
                 parameters: Mapping[str, ParamValue] | None = None) -> None:
@@ -607,19 +493,13 @@ class SimBackend:
 
     def _after(self, node: str, delay: float, action: Callable[[], None]) -> None:
         """Schedule ``action`` on behalf of ``node``'s process, so that a crash or restart cancels it."""
-        timers = self._timers[node]
-        run = _NodeTimer(timers, action)
-        run.handle = self._clock.call_later(max(0.0, delay), run)
-        timers.add(run.handle)
+        self._timers.after(node, delay, action)
 
     def _cancel_timers(self, node: str) -> None:
-        for handle in self._timers[node]:
-            handle.cancel()
-        self._timers[node].clear()
+        self._timers.cancel(node)
 
     def _delay(self, node: str, transition: Transition | None, default: float) -> float:
-        per_node = self._delays.get((node, None), default)
-        return per_node if transition is None else self._delays.get((node, transition), per_node)
+        return self._armed.delay(node, transition, default)
 
     def _require(self, node: str) -> None:
         if node not in self._nodes:
@@ -648,23 +528,3 @@ def _transition_result(node: str, transition: Transition, outcome: Outcome, fina
     if outcome is Outcome.ERROR:
         reason += f" (node went to errorprocessing, then {final})"
     return CallResult(False, reason)
-
-
-def _start_state(value: StartState, what: str) -> State:
-    """``value`` as a state a node process can start in; ``ValueError`` naming the valid ones."""
-    valid = ", ".join(state.label for state in _STARTABLE)
-    if isinstance(value, State):
-        state = value
-    else:
-        try:
-            state = State.from_label(value)
-        except ValueError:
-            raise ValueError(f"{what} {value!r} is not a lifecycle state: use one of {valid}") from None
-    if not state.is_primary:
-        raise ValueError(f"{what} {state.label!r} is not a primary state: a node starts in one of {valid}")
-    return state
-
-
-def _check_delay(label: str, seconds: float) -> None:
-    if not (math.isfinite(seconds) and seconds >= 0):
-        raise ValueError(f"{label} must be a finite number of seconds >= 0, not {seconds!r}")
