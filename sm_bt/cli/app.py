@@ -1,7 +1,7 @@
 """``sm-bt``: the table of commands, the parser built from it, and :func:`main`.
 
 Each command lives in a module of its own in this package (``check``, ``modes``, ``demo``,
-``monitor``, ``view``, ``manager``, ``sim_nodes``) with an ``add_arguments(parser)`` and a ``run(args)`` that
+``monitor``, ``view``, ``manager``, ``mission``, ``sim_nodes``) with an ``add_arguments(parser)`` and a ``run(args)`` that
 returns the exit code; what commands share is in :mod:`sm_bt.cli.common` (the program's name,
 :class:`~sm_bt.cli.common.CliError`, loading a model by path or bundled name) and
 :mod:`sm_bt.cli.arguments` (argument types). To add a command, write its module and add a
@@ -17,7 +17,7 @@ import argparse
 import os
 import sys
 
-from sm_bt.cli import check, demo, manager, modes, monitor, remote, sim_nodes, view
+from sm_bt.cli import check, demo, manager, mission, modes, monitor, remote, sim_nodes, view
 from sm_bt.cli.common import PROG, CliError, Command, UsageError
 from sm_bt.model.types import DEFAULT_MODE
 
@@ -59,6 +59,13 @@ COMMANDS: list[Command] = [
                         "get_mode, get_available_modes for every part of MODEL, publish mode_event, "
                         "transition_event and the request topics (latched, as soon as inference changes), and "
                         "manage the nodes through their lifecycle and parameter services. Needs the ros extra."),
+    Command("mission", "host a mission tree on ROS 2, the manager embedded (for launch files)",
+            mission.add_arguments, mission.run,
+            description="Tick TREE (a .xml file or package.module:function) on one ROS 2 node that embeds the mode "
+                        "manager of MODEL and serves its system_modes interface and the tree's snapshot streams. "
+                        "MODEL and TREE may also be the ROS parameters model and tree (--ros-args -p model:=...). "
+                        "Exit status 0 when the root succeeds or on SIGINT/SIGTERM, 1 when it fails. Needs the ros "
+                        "extra."),
     Command("sim-nodes", "run a model's nodes as simulated ROS 2 lifecycle nodes (stand-ins for a robot)",
             sim_nodes.add_arguments, sim_nodes.run,
             description="Run the model's nodes as simulated rclpy lifecycle nodes in this process, declaring each "

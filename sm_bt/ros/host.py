@@ -1,23 +1,7 @@
 """Host a mission tree on ROS 2: one node, the manager embedded, the tree ticked at a rate.
 
-As a program (``sm-bt-mission``, e.g. from a launch file), configured with ROS parameters::
-
-    sm-bt-mission --ros-args -p model:=robot.yaml -p tree:=mission.xml -p rate:=10.0
-
-    # launch file
-    ExecuteProcess(cmd=["sm-bt-mission", "--ros-args", "-p", "model:=/path/robot.yaml",
-                        "-p", "tree:=/path/mission.xml", "-r", "__node:=mission"])
-
-Parameters: ``model`` (an SMH model file, or a bundled model's name), ``tree`` (a tree file,
-``.xml``, or ``package.module:function`` returning the root), ``rate`` (ticks per second, default
-10), ``wait_for_nodes`` (seconds to wait for the model's nodes before the first tick, default 10;
-0 starts at once). The node (``sm_bt_mission`` unless remapped) serves the system_modes interface
-of the model's parts; the process has one DDS participant. The tree runs until its root succeeds
-or fails (exit status 0 or 1) or the process gets SIGINT/SIGTERM (0). Discovery and the domain
-are the user's (``ROS_DOMAIN_ID``, ``ROS_AUTOMATIC_DISCOVERY_RANGE``), so nodes may be on other
-machines. One log line per change of the root's status and per mode or state a system reaches.
-
-From Python, :class:`MissionHost` does the same with objects::
+The program is ``sm-bt mission`` (:mod:`sm_bt.cli.mission`); from Python, :class:`MissionHost`
+does the same with objects::
 
     host = MissionHost(load_model("robot.yaml"), load_tree("mission.xml"), node=my_node)
     status = host.run()
@@ -28,13 +12,8 @@ from __future__ import annotations
 import contextlib
 import importlib
 import logging
-import signal
-import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
-from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import py_trees
@@ -42,7 +21,7 @@ from py_trees.common import Status
 
 from sm_bt.behaviours.manager_access import attach_manager
 from sm_bt.engine.events import Event, EventKind
-from sm_bt.model.errors import Error, ModelError
+from sm_bt.model.errors import Error
 from sm_bt.model.types import Model, SystemPart
 from sm_bt.ros.snapshot_streams import SnapshotStreams
 
@@ -172,90 +151,3 @@ def load_root(spec: str, model: Model) -> py_trees.behaviour.Behaviour:
     if not isinstance(root, py_trees.behaviour.Behaviour):
         raise HostError(f"{spec} returned {type(root).__name__}, not a py_trees behaviour")
     return root
-
-
-def _parameters(node: Any) -> tuple[str, str, float, float]:
-    from rcl_interfaces.msg import ParameterDescriptor
-
-    def declare(name: str, default: Any, description: str) -> Any:
-        return node.declare_parameter(name, default, ParameterDescriptor(description=description)).value
-
-    model = declare("model", "", "SMH model file, or a bundled model's name")
-    tree = declare("tree", "", "mission tree: a .xml file or package.module:function")
-    rate = declare("rate", 10.0, "ticks per second")
-    wait = declare("wait_for_nodes", 10.0, "seconds to wait for the model's nodes (0: do not wait)")
-    if not model or not tree:
-        missing = " and ".join(name for name, value in (("model", model), ("tree", tree)) if not value)
-        raise HostError(f"set the {missing} parameter: sm-bt-mission --ros-args -p model:=robot.yaml "
-                        "-p tree:=mission.xml")
-    return str(model), str(tree), float(rate), float(wait)
-
-
-def _load_model(name: str) -> Model:
-    from sm_bt.bundled import names as bundled_names
-    from sm_bt.bundled import path as bundled_path
-    from sm_bt.model.loader import load_model
-
-    path = Path(name)
-    if not path.exists():
-        if name not in bundled_names():
-            raise HostError(f"no model file {name} (nor a bundled model: {', '.join(bundled_names())})")
-        path = bundled_path(name)
-    try:
-        return load_model(path)
-    except ModelError as error:
-        raise HostError(f"the model has mistakes:\n{error}") from None
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``sm-bt-mission``: see the module's documentation."""
-    from sm_bt.ros.console_log import configure_logging
-    from sm_bt.ros.environment import RosUnavailable, prepare, require_ros
-
-    configure_logging("info")
-    args = list(sys.argv if argv is None else ["sm-bt-mission", *argv])
-    prepare(local_only=False)  # a robot's nodes may be on other machines: the user's discovery
-    try:
-        require_ros()
-    except RosUnavailable as error:
-        log.error("%s", error)
-        return 1
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.signals import SignalHandlerOptions
-
-    context = Context()
-    rclpy.init(args=args, context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node(NODE_NAME, context=context)
-    host: MissionHost | None = None
-    try:
-        model_name, tree_spec, rate, wait = _parameters(node)
-        model = _load_model(model_name)
-        host = MissionHost(model, load_root(tree_spec, model), node, rate=rate)
-        _stop_on_signals(host.stop)
-        log.info("mission %s on node %s: %s at %g Hz, model %s", tree_spec, node.get_fully_qualified_name(),
-                 host.tree.root.name, rate, model.path)
-        if wait > 0:
-            host.wait_for_nodes(wait)
-        status = host.run()
-        return 1 if status is Status.FAILURE else 0
-    except HostError as error:
-        log.error("%s", error)
-        return 1
-    finally:
-        if host is not None:
-            host.close()
-        node.destroy_node()
-        context.try_shutdown()
-
-
-def _stop_on_signals(stop: Callable[[], None]) -> None:
-    def handler(signum: int, frame: FrameType | None) -> None:
-        stop()
-
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))

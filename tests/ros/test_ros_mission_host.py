@@ -1,5 +1,5 @@
-"""``sm-bt-mission``: a mission tree hosted on ROS 2 from a launch-file style command line (ROS
-parameters), serving the system_modes interface while it ticks, ending cleanly on SIGINT."""
+"""``sm-bt mission``: a mission tree hosted on ROS 2 from a launch-file style command line (ROS
+parameters, or MODEL TREE), serving the system_modes interface while it ticks, ending cleanly on SIGINT."""
 
 from __future__ import annotations
 
@@ -29,8 +29,9 @@ MISSION = """<root main_tree_to_execute="Mission">
 """
 
 
-def _host(tmp_path: Path, *parameters: str) -> subprocess.Popen[str]:
-    command = [sys.executable, "-m", "sm_bt.ros.host", "--ros-args"]
+def _host(tmp_path: Path, *parameters: str, positional: tuple[str, ...] = ()) -> subprocess.Popen[str]:
+    """``sm-bt mission [POSITIONAL...] --ros-args -p PARAMETER...``"""
+    command = [sys.executable, "-m", "sm_bt.cli", "mission", *positional, "--ros-args"]
     for parameter in parameters:
         command += ["-p", parameter]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
@@ -74,7 +75,7 @@ def test_a_mission_that_ends_sets_the_exit_status(node_processes: Starter, tmp_p
     node_processes("pilot")
     (tmp_path / "mission.xml").write_text(MISSION.format(last='<ModeIs name="Fast?" part="pilot" '
                                                                'mode="f_performance_mode"/>'))
-    host = _host(tmp_path, "model:=pilot", "tree:=mission.xml", "rate:=20.0")
+    host = _host(tmp_path, "rate:=20.0", positional=("pilot", "mission.xml"))  # as typed in a shell
     try:
         code, err = host.wait(40.0), ""
     finally:
@@ -84,8 +85,8 @@ def test_a_mission_that_ends_sets_the_exit_status(node_processes: Starter, tmp_p
 
 
 @pytest.mark.parametrize(("parameters", "message"), [
-    (("model:=pilot",), "set the tree parameter: sm-bt-mission --ros-args -p model:=robot.yaml"),
-    (("model:=nope.yaml", "tree:=mission.xml"), "no model file nope.yaml (nor a bundled model: "),
+    (("model:=pilot",), "give the tree: sm-bt mission MODEL TREE, or as ROS parameters"),
+    (("model:=nope.yaml", "tree:=mission.xml"), "nope.yaml: no such file, and no bundled model of that name (bundled: "),
     (("model:=pilot", "tree:=bad.xml"), "bad.xml:3: error: unknown node <Sequense>"),
     (("model:=pilot", "tree:=mission.xml", "rate:=0.0"), "rate must be more than 0"),
 ])

@@ -51,7 +51,7 @@ def client() -> Iterator[RosContext]:
 def mission(tmp_path: Path) -> Iterator[subprocess.Popen[str]]:
     """The hosted mission, started before the nodes: it waits for them in the tree."""
     (tmp_path / "mission.xml").write_text(MISSION.replace(' parts="{parts}"', ""))
-    host = subprocess.Popen([sys.executable, "-m", "sm_bt.ros.host", "--ros-args", "-p", "model:=pilot",
+    host = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "mission", "--ros-args", "-p", "model:=pilot",
                              "-p", "tree:=mission.xml", "-p", "rate:=20.0", "-p", "wait_for_nodes:=0.0",
                              "-r", "__node:=mission_tree"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
