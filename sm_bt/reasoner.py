@@ -12,8 +12,7 @@ The reasoner is plain Python (no py_trees): a behaviour tree, a ROS node or a sc
 status reports, call :meth:`Reasoner.decide`, and apply the choice with
 :meth:`Reasoner.reconfigure` through a :class:`~sm_bt.engine.manager.ModeManager`.
 
-The pilot data (:data:`PILOT_DESIGNS`, :data:`PILOT_OBJECTIVE`) are those of the MROS pilot
-ontology (``URJCpilot.owl``).
+The pilot's designs and objective are the example's (:mod:`sm_bt.trees.pilot.designs`).
 """
 
 from __future__ import annotations
@@ -30,13 +29,10 @@ from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model
 
 __all__ = [
-    "PILOT_DESIGNS",
-    "PILOT_OBJECTIVE",
     "Decision",
     "FunctionDesign",
     "Objective",
     "Reasoner",
-    "pilot_reasoner",
 ]
 
 #: Status words of MROS diagnostics, by whether they mean "component OK".
@@ -309,26 +305,3 @@ class Reasoner:
         if missing:
             raise ValueError(f"designs of {self.part} name modes the model lacks: {', '.join(missing)} "
                              f"(modes of {self.part}: {', '.join(part.modes)})")
-
-
-#: The function designs of the MROS pilot ontology (URJCpilot.owl), one per system mode of ``pilot``.
-PILOT_DESIGNS: tuple[FunctionDesign, ...] = (
-    FunctionDesign("f_normal_mode", frozenset({"battery", "laser_resender"}),
-                   {"energy": 0.5, "performance": 0.7, "safety": 0.8}),
-    FunctionDesign("f_degraded_mode", frozenset({"battery"}),
-                   {"energy": 0.45, "performance": 0.2, "safety": 0.55}),
-    FunctionDesign("f_energy_saving_mode", frozenset({"laser_resender"}),
-                   {"energy": 0.34, "performance": 0.3, "safety": 0.6}),
-    FunctionDesign("f_performance_mode", frozenset({"battery", "laser_resender"}),
-                   {"energy": 0.7, "performance": 0.9, "safety": 0.55}),
-    FunctionDesign("f_slow_mode", frozenset({"battery", "laser_resender"}),
-                   {"energy": 0.3, "performance": 0.4, "safety": 0.7}),
-)
-
-#: The pilot's objective: energy at most 0.5, safety at least 0.5, ranked by performance.
-PILOT_OBJECTIVE = Objective(maximum={"energy": 0.5}, minimum={"safety": 0.5}, utility="performance")
-
-
-def pilot_reasoner() -> Reasoner:
-    """A reasoner for the bundled ``pilot`` model's system ``pilot``."""
-    return Reasoner("pilot", PILOT_DESIGNS, PILOT_OBJECTIVE)

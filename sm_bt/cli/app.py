@@ -1,9 +1,10 @@
 """``sm-bt``: the table of commands, the parser built from it, and :func:`main`.
 
 Each command lives in a module of its own in this package (``check``, ``modes``, ``demo``,
-``monitor``, ``view``, ``manager``, ``mission``, ``sim_nodes``) with an ``add_arguments(parser)`` and a ``run(args)`` that
-returns the exit code; what commands share is in :mod:`sm_bt.cli.common` (the program's name,
-:class:`~sm_bt.cli.common.CliError`, loading a model by path or bundled name) and
+``monitor``, ``view``, ``manager``, ``mission``, ``sim_nodes``, ``remote``) with an
+``add_arguments(parser)`` and a ``run(args)`` that returns the exit code; what commands share is
+in :mod:`sm_bt.cli.common` (the program's name, :class:`~sm_bt.cli.common.CliError`, loading a
+model by path or bundled name) and
 :mod:`sm_bt.cli.arguments` (argument types). To add a command, write its module and add a
 :class:`~sm_bt.cli.common.Command` to :data:`COMMANDS`.
 

@@ -1,6 +1,6 @@
 """``sm-bt demo``: the pilot mission on simulated nodes, or with ``--ros`` on real rclpy nodes.
 
-The demo itself (platforms, world, narration, summary) is :mod:`sm_bt.demo`; this module is its
+The demo itself (platforms, world, narration, summary) is :mod:`sm_bt.trees.pilot.demo`; this module is its
 command line.
 """
 
@@ -11,14 +11,14 @@ import sys
 
 from sm_bt.cli.arguments import non_negative, port, positive_int
 from sm_bt.cli.common import PROG, CliError
-from sm_bt.demo import DEGRADED_FOR, REPAIR_AT, TREES, Auto, Demo, Options
 from sm_bt.trees.mission_xml import TreeFileError
+from sm_bt.trees.pilot.demo import DEGRADED_FOR, REPAIR_AT, TREES, Auto, Demo, Options
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tree", type=_tree, default="pilot", metavar="TREE",
                         help="contingencies in the tree (pilot, default), chosen by a metacontroller "
-                             "(metacontrol), or a mission tree file in XML (trees/pilot.xml is the pilot "
+                             "(metacontrol), or a mission tree file in XML (trees/pilot/pilot.xml is the pilot "
                              "tree; {cycles} in it is --cycles)")
     parser.add_argument("--laser-failure-at", type=_time, default=15.0, metavar="SECONDS",
                         help="world time the laser breaks; 'never' for no failure (default 15)")

@@ -52,16 +52,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _settings(node: Any, args: argparse.Namespace) -> tuple[str, str, float, float]:
     """The command line's values, else the node's ROS parameters (declared either way, so that
     ``ros2 param get`` shows what the mission runs with)."""
-    from rcl_interfaces.msg import ParameterDescriptor
+    from sm_bt.ros.host import declare
 
-    def declare(name: str, given: Any, default: Any, description: str) -> Any:
-        value = node.declare_parameter(name, default, ParameterDescriptor(description=description)).value
+    def setting(name: str, given: Any, default: Any, description: str) -> Any:
+        value = declare(node, name, default, description)
         return value if given is None else given
 
-    model = declare("model", args.model, "", "SMH model file, or a bundled model's name")
-    tree = declare("tree", args.tree, "", "mission tree: a .xml file or package.module:function")
-    rate = declare("rate", args.rate, 10.0, "ticks per second")
-    wait = declare("wait_for_nodes", args.wait_for_nodes, 10.0, "seconds to wait for the model's nodes (0: do not)")
+    model = setting("model", args.model, "", "SMH model file, or a bundled model's name")
+    tree = setting("tree", args.tree, "", "mission tree: a .xml file or package.module:function")
+    rate = setting("rate", args.rate, 10.0, "ticks per second")
+    wait = setting("wait_for_nodes", args.wait_for_nodes, 10.0, "seconds to wait for the model's nodes (0: do not)")
     if not model or not tree:
         missing = " and ".join(name for name, value in (("model", model), ("tree", tree)) if not value)
         raise CliError(f"give the {missing}: sm-bt mission MODEL TREE, or as ROS parameters "
@@ -79,39 +79,30 @@ def run(args: argparse.Namespace) -> int:
         require_ros()
     except RosUnavailable as error:
         raise CliError(str(error)) from None
-    import rclpy
     from py_trees.common import Status
-    from rclpy.context import Context
-    from rclpy.signals import SignalHandlerOptions
 
-    from sm_bt.ros.host import NODE_NAME, HostError, MissionHost, load_root
+    from sm_bt.ros.host import HostError, MissionHost, load_root, mission_node
 
-    context = Context()
-    rclpy.init(args=["sm-bt", "--ros-args", *args.ros_args] if args.ros_args else ["sm-bt"], context=context,
-               signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node(NODE_NAME, context=context)
-    host: MissionHost | None = None
-    try:
-        model_name, tree_spec, rate, wait = _settings(node, args)
+    with mission_node(args.ros_args) as node:
+        host: MissionHost | None = None
         try:
-            model = load(model_name)
-        except ModelError as error:
-            raise CliError(f"the model has mistakes:\n{error}") from None
-        host = MissionHost(model, load_root(tree_spec, model), node, rate=rate)
-        _stop_on_signals(host.stop)
-        log.info("mission %s on node %s: %s at %g Hz, model %s", tree_spec, node.get_fully_qualified_name(),
-                 host.tree.root.name, rate, model.path)
-        if wait > 0:
-            host.wait_for_nodes(wait)
-        status = host.run()
-        return 1 if status is Status.FAILURE else 0
-    except HostError as error:
-        raise CliError(str(error)) from None
-    finally:
-        if host is not None:
-            host.close()
-        node.destroy_node()
-        context.try_shutdown()
+            model_name, tree_spec, rate, wait = _settings(node, args)
+            try:
+                model = load(model_name)
+            except ModelError as error:
+                raise CliError(f"the model has mistakes:\n{error}") from None
+            host = MissionHost(model, load_root(tree_spec, model), node, rate=rate)
+            _stop_on_signals(host.stop)
+            log.info("mission %s on node %s: %s at %g Hz, model %s", tree_spec, node.get_fully_qualified_name(),
+                     host.tree.root.name, rate, model.path)
+            if wait > 0:
+                host.wait_for_nodes(wait)
+            return 1 if host.run() is Status.FAILURE else 0
+        except HostError as error:
+            raise CliError(str(error)) from None
+        finally:
+            if host is not None:
+                host.close()
 
 
 def _stop_on_signals(stop: Any) -> None:

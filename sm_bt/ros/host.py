@@ -14,6 +14,7 @@ import importlib
 import logging
 import threading
 import time
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import py_trees
@@ -128,6 +129,32 @@ class MissionHost:
                 self._executor.shutdown(timeout_sec=2.0)
             if self._thread is not None:
                 self._thread.join(3.0)
+
+
+@contextlib.contextmanager
+def mission_node(ros_args: Sequence[str]) -> Iterator[Any]:
+    """A node named :data:`NODE_NAME` (unless ``ros_args`` remap it) in a context of its own,
+    destroyed with its context on leaving."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    context = Context()
+    rclpy.init(args=["sm-bt", "--ros-args", *ros_args] if ros_args else ["sm-bt"], context=context,
+               signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node(NODE_NAME, context=context)
+    try:
+        yield node
+    finally:
+        node.destroy_node()
+        context.try_shutdown()
+
+
+def declare(node: Any, name: str, default: Any, description: str) -> Any:
+    """Declare the ROS parameter ``name`` of ``node``; its value (``default`` unless set)."""
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    return node.declare_parameter(name, default, ParameterDescriptor(description=description)).value
 
 
 def load_root(spec: str, model: Model) -> py_trees.behaviour.Behaviour:

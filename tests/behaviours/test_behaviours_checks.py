@@ -26,8 +26,9 @@ from sm_bt.behaviours import (
 )
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State
-from sm_bt.reasoner import PILOT_DESIGNS, PILOT_OBJECTIVE, Reasoner
+from sm_bt.reasoner import Reasoner
 from sm_bt.sim import SimulatedSystem
+from sm_bt.trees.pilot.designs import PILOT_DESIGNS, PILOT_OBJECTIVE
 
 PILOT_PARTS = "pilot, amcl, controller_server, pointcloud_to_laser, laser_resender"
 

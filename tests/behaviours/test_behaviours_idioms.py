@@ -24,8 +24,9 @@ from sm_bt.behaviours import (
 from sm_bt.engine.events import Event, EventKind
 from sm_bt.engine.lifecycle import Outcome, Transition
 from sm_bt.model.states import State, StateMode
-from sm_bt.reasoner import PILOT_OBJECTIVE, FunctionDesign, Reasoner, pilot_reasoner
+from sm_bt.reasoner import FunctionDesign, Reasoner
 from sm_bt.sim import SimulatedSystem
+from sm_bt.trees.pilot.designs import PILOT_OBJECTIVE, pilot_reasoner
 
 NORMAL = StateMode(State.ACTIVE, "f_normal_mode")
 PERFORMANCE = StateMode(State.ACTIVE, "f_performance_mode")

@@ -231,7 +231,7 @@ def test_a_mangled_pilot_xml_loads_or_is_an_error_never_a_crash(data: st.DataObj
 
 
 def test_regression_a_cut_reference_in_a_decorator_is_an_error_not_a_crash(tmp_path: Path) -> None:
-    """Found by the fuzz test: four bytes dropped from trees/pilot.xml left num_success="les}",
+    """Found by the fuzz test: four bytes dropped from trees/pilot/pilot.xml left num_success="les}",
     which py_trees' parser raised ValueError on."""
     text = pilot.XML.read_bytes()
     at = text.index(b"{cycles}")

@@ -13,10 +13,11 @@ from py_trees.common import Status
 from sm_bt.engine.events import Event
 from sm_bt.model.types import Model
 from sm_bt.sim import SimulatedSystem
-from sm_bt.sim.world import PATROL, LaserDevice, World
-from sm_bt.trees import pilot, pilot_metacontrol
+from sm_bt.trees import pilot
 from sm_bt.trees.mission_xml import load_tree
-from sm_bt.trees.pilot_actions import NavigateTo, Recharge
+from sm_bt.trees.pilot import metacontrol as pilot_metacontrol
+from sm_bt.trees.pilot.actions import NavigateTo, Recharge
+from sm_bt.trees.pilot.world import PATROL, LaserDevice, World
 
 TREES: dict[str, Callable[[int], py_trees.behaviour.Behaviour]] = {
     "pilot": lambda cycles: pilot.create_root(cycles),

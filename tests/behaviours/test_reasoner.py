@@ -9,16 +9,9 @@ import pytest
 from model_files import bundled
 
 from sm_bt.model.types import SystemPart
-from sm_bt.reasoner import (
-    PILOT_DESIGNS,
-    PILOT_OBJECTIVE,
-    Decision,
-    FunctionDesign,
-    Objective,
-    Reasoner,
-    pilot_reasoner,
-)
+from sm_bt.reasoner import Decision, FunctionDesign, Objective, Reasoner
 from sm_bt.sim import SimulatedSystem
+from sm_bt.trees.pilot.designs import PILOT_DESIGNS, PILOT_OBJECTIVE, pilot_reasoner
 
 
 def design(mode: str, performance: float, *, energy: float = 0.1, safety: float = 0.9,

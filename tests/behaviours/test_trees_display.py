@@ -9,7 +9,8 @@ import py_trees
 import pytest
 
 from sm_bt.behaviours import hold_mode, switch_on_divergence
-from sm_bt.trees import pilot, pilot_metacontrol
+from sm_bt.trees import pilot
+from sm_bt.trees.pilot import metacontrol as pilot_metacontrol
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning:pydot")  # its parser's pyparsing calls
 

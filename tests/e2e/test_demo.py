@@ -11,7 +11,7 @@ from rich.console import Console
 from tree_helpers import PILOT_DEMO_STORY, assert_in_order
 
 from sm_bt.cli import main
-from sm_bt.demo import Demo, Options
+from sm_bt.trees.pilot.demo import Demo, Options
 
 
 def run_demo(**options: object) -> tuple[int, str, Demo]:

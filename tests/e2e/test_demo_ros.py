@@ -32,7 +32,7 @@ from ros_processes import DUMPABLE, RosContext, Starter, communicate_or_dump
 from tree_helpers import PILOT_DEMO_STORY, assert_in_order
 
 from sm_bt.cli import main
-from sm_bt.demo import Demo, Options
+from sm_bt.trees.pilot.demo import Demo, Options
 
 pytestmark = pytest.mark.ros
 

@@ -49,13 +49,28 @@ def test_behaviours_and_trees_sit_above_the_engine() -> None:
     engine_and_model = imported_modules(ROOT / "sm_bt" / "engine") | imported_modules(ROOT / "sm_bt" / "model")
     assert not {m for m in engine_and_model if m.startswith(("sm_bt.behaviours", "sm_bt.trees", "sm_bt.sim"))}
     behaviours = imported_modules(ROOT / "behaviours")
-    assert not {m for m in behaviours if m.startswith(("sm_bt.trees", "sm_bt.demo", "sm_bt.cli"))}
+    assert not {m for m in behaviours if m.startswith(("sm_bt.trees", "sm_bt.trees.pilot.demo", "sm_bt.cli"))}
 
 
-def test_the_ros_adapters_import_no_command_line() -> None:
-    """Executables sit at the top: the CLI starts the ROS adapters, never the other way round."""
+def test_the_ros_adapters_import_no_command_line_and_no_example() -> None:
+    """Executables and the pilot example sit at the top: the CLI and the example start the ROS
+    adapters, never the other way round; the simulated backend knows no example either."""
     ros = imported_modules(ROOT / "sm_bt" / "ros")
-    assert not {m for m in ros if m.startswith("sm_bt.cli")}
+    assert not {m for m in ros if m.startswith(("sm_bt.cli", "sm_bt.trees.pilot"))}
+    sim = imported_modules(ROOT / "sm_bt" / "sim")
+    assert not {m for m in sim if m.startswith(("sm_bt.cli", "sm_bt.trees", "sm_bt.behaviours", "sm_bt.view"))}
+
+
+def test_the_pilot_example_is_one_wing() -> None:
+    """Everything of the pilot example but its model file lives in trees/pilot/; outside it, only the
+    CLI (`sm-bt demo`) reaches into it."""
+    outside = set()
+    for folder in (ROOT / "sm_bt", ROOT / "behaviours"):
+        for path in folder.rglob("*.py"):
+            if (ROOT / "sm_bt" / "cli") not in path.parents:
+                outside |= {m for m in imported_modules_of(path) if m.startswith("sm_bt.trees.pilot")}
+    assert not outside
+    assert not list((ROOT / "trees").glob("pilot_*.py")) and not (ROOT / "sm_bt" / "demo.py").exists()
 
 
 def imported_modules_of(path: Path) -> set[str]:
@@ -77,10 +92,23 @@ def test_only_the_ros_adapters_import_rclpy() -> None:
                 continue
             outside |= {m for m in imported_modules_of(path) if m.split(".")[0] in ros_names}
     assert not outside, "rclpy and ROS messages belong in sm_bt.ros"
-    # The simulated side never reaches up into the ROS adapters.
+    # The simulated side never reaches up into the ROS adapters; of the trees, only the pilot
+    # example's platform for `sm-bt demo --ros` does (it is imported by that command alone).
+    platform = ROOT / "trees" / "pilot" / "ros_platform.py"
+    trees = set().union(*(imported_modules_of(path) for path in (ROOT / "trees").rglob("*.py") if path != platform))
     below = imported_modules(ROOT / "sm_bt" / "engine") | imported_modules(ROOT / "sm_bt" / "sim") | \
-        imported_modules(ROOT / "behaviours") | imported_modules(ROOT / "trees")
+        imported_modules(ROOT / "behaviours") | trees
     assert not {m for m in below if m.startswith("sm_bt.ros")}
+    assert {m for m in imported_modules_of(platform) if m.startswith("sm_bt.ros")}  # the rule can fail
+
+
+def test_the_pilot_demo_imports_without_rclpy() -> None:
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "import sm_bt.trees.pilot.demo, sm_bt.trees.pilot.metacontrol\n"
+        "assert not any(m == 'rclpy' or m.startswith('rclpy.') for m in sys.modules if sys.modules[m])\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
 
 
 def test_the_cli_starts_without_rclpy() -> None:

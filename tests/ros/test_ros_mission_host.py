@@ -86,7 +86,7 @@ def test_a_mission_that_ends_sets_the_exit_status(node_processes: Starter, tmp_p
 
 @pytest.mark.parametrize(("parameters", "message"), [
     (("model:=pilot",), "give the tree: sm-bt mission MODEL TREE, or as ROS parameters"),
-    (("model:=nope.yaml", "tree:=mission.xml"), "nope.yaml: no such file, and no bundled model of that name (bundled: "),
+    (("model:=nope.yaml", "tree:=mission.xml"), "nope.yaml: no such file, and no bundled model of that name"),
     (("model:=pilot", "tree:=bad.xml"), "bad.xml:3: error: unknown node <Sequense>"),
     (("model:=pilot", "tree:=mission.xml", "rate:=0.0"), "rate must be more than 0"),
 ])

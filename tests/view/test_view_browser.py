@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from sm_bt.demo import Demo, Options, SimulatedPlatform
+from sm_bt.trees.pilot.demo import Demo, Options
+from sm_bt.trees.pilot.platforms import SimulatedPlatform
 from sm_bt.view import View, attach_view, read_recording
 from sm_bt.view.assets import ASSETS, NEEDED, from_wheel, kept_wheel, missing
 from sm_bt.view.server import ViewServer

@@ -16,10 +16,11 @@ from py_trees.common import Access, Status
 
 from sm_bt.behaviours import ChangeState, ManagerBehaviour, Reconfigure
 from sm_bt.model.types import Model
-from sm_bt.reasoner import Reasoner, pilot_reasoner
+from sm_bt.reasoner import Reasoner
 from sm_bt.trees import pilot
 from sm_bt.trees.pilot import SYSTEM, go_and_recharge, patrol
-from sm_bt.trees.pilot_actions import BATTERY_OK, LASER_SCANS_OK
+from sm_bt.trees.pilot.actions import BATTERY_OK, LASER_SCANS_OK
+from sm_bt.trees.pilot.designs import pilot_reasoner
 
 
 class ComponentsToReasoner(ManagerBehaviour):

@@ -1,6 +1,6 @@
 """The ROS 2 side of ``sm-bt demo --ros``: the pilot's nodes in a child process, the manager on ROS.
 
-:class:`RosPlatform` is what :class:`sm_bt.demo.Demo` runs on with ``--ros``: the pilot's nodes as
+:class:`RosPlatform` is what :class:`sm_bt.trees.pilot.demo.Demo` runs on with ``--ros``: the pilot's nodes as
 real rclpy lifecycle nodes in a child :class:`~sm_bt.ros.node_process.NodesProcess`, an embedded
 :class:`~sm_bt.ros.runtime.RosRuntime` that also serves the system_modes interface while the
 demo runs, real time between ticks, and the laser failure as the node's ``sim.broken`` parameter
@@ -26,7 +26,7 @@ from sm_bt.ros.environment import prepare, require_ros
 from sm_bt.ros.node_process import NodesError, NodesProcess
 from sm_bt.ros.runtime import MANAGER_NODE_NAME, RosRuntime
 from sm_bt.ros.snapshot_streams import SnapshotStreams
-from sm_bt.sim.world import World
+from sm_bt.trees.pilot.world import World
 
 DISCOVERY_TIMEOUT = 15.0  # until the manager reaches every node
 CALL_TIMEOUT = 5.0  # every service call of the backend
@@ -54,7 +54,7 @@ def _sigterm_as_interrupt() -> Iterator[None]:
 
 
 class RosPlatform:
-    """The demo's platform on ROS 2 (see :class:`sm_bt.demo.Platform`).
+    """The demo's platform on ROS 2 (see :class:`sm_bt.trees.pilot.demo.Platform`).
 
     Starts ``model``'s nodes in a child process (``model_name`` is what the child loads: a file or
     a bundled model's name), the runtime (manager with ``manager_options``), waits until the

@@ -1,8 +1,8 @@
 """The pilot's mission actions and sensors, over the simulated world.
 
 ``tree.setup(manager=..., world=...)`` hands them the mode manager and the
-:class:`~sm_bt.sim.world.World`. :class:`NavigateTo` is where modes show: the robot drives at the
-speed controller_server's parameters give it (as the node reports them to the manager), and it
+:class:`~sm_bt.trees.pilot.world.World`. :class:`NavigateTo` is where modes show: the robot drives
+at the speed controller_server's parameters give it (as the node reports them to the manager), and it
 cannot move without an active controller and an active laser source.
 """
 
@@ -17,7 +17,7 @@ from py_trees.ports import PortInformation, PortsMixin
 from sm_bt.behaviours.manager_access import ManagerBehaviour, flag
 from sm_bt.model.states import State
 from sm_bt.model.types import Model
-from sm_bt.sim.world import World
+from sm_bt.trees.pilot.world import World
 
 #: Blackboard keys the pilot's sensors write (booleans: True = component OK).
 BATTERY_LEVEL = "/battery/level"

@@ -28,8 +28,7 @@ from sm_bt.behaviours import (
     hold_mode,
     switch_on_divergence,
 )
-from sm_bt.sim.world import PATROL
-from sm_bt.trees.pilot_actions import (
+from sm_bt.trees.pilot.actions import (
     BATTERY_LEVEL,
     LASER_SCANS_OK,
     BatteryToBlackboard,
@@ -41,6 +40,7 @@ from sm_bt.trees.pilot_actions import (
     ScansToBlackboard,
     Visited,
 )
+from sm_bt.trees.pilot.world import PATROL
 
 #: The same mission in BehaviorTree.CPP-style XML (:func:`sm_bt.trees.mission_xml.load_tree`).
 XML = Path(__file__).with_name("pilot.xml")

@@ -1,20 +1,20 @@
 """``sm-bt demo``: the MROS pilot mission tree on simulated nodes in a small simulated world.
 
-The mission tree (``sm_bt.trees.pilot``, or ``pilot_metacontrol`` with ``--tree metacontrol``)
-patrols seven waypoints; the robot drives at the speed controller_server's parameters give it,
+The mission tree (``sm_bt.trees.pilot``, or ``sm_bt.trees.pilot.metacontrol`` with ``--tree
+metacontrol``) patrols seven waypoints; the robot drives at the speed controller_server's parameters give it,
 the battery drains per metre, and the laser breaks and is repaired at chosen times. Everything
 the tree changes goes through mode requests to the embedded manager. The narrative prints the
 requests and their confirmations with timings, divergences, recoveries and contingencies, the
 tree at key moments and the mode monitor, then a summary. Virtual time runs faster than wall
 time (``--speed``).
 
-The same demo runs on two platforms (:class:`Platform`): by default simulated nodes
+The same demo runs on two platforms (:mod:`sm_bt.trees.pilot.platforms`): by default simulated nodes
 (:class:`SimulatedPlatform`: the simulated backend on a virtual clock, the laser failure through
-:class:`~sm_bt.sim.world.LaserDevice`), and with ``--ros`` real rclpy lifecycle nodes in a child
-process (:class:`sm_bt.ros.demo_nodes.RosPlatform`: the manager on ROS 2 and a wall clock, the laser
+:class:`~sm_bt.trees.pilot.world.LaserDevice`), and with ``--ros`` real rclpy lifecycle nodes in a child
+process (:class:`sm_bt.trees.pilot.ros_platform.RosPlatform`: the manager on ROS 2 and a wall clock, the laser
 failure as the node's ``sim.broken`` parameter). On ROS, mode changes, grace periods and timeouts
 take real time while the world (driving, recharging, the laser schedule) runs ``--speed`` times
-faster (:attr:`World.time_scale <sm_bt.sim.world.World.time_scale>`).
+faster (:attr:`World.time_scale <sm_bt.trees.pilot.world.World.time_scale>`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
 
 import py_trees
 from py_trees.blackboard import Blackboard
@@ -33,26 +32,20 @@ from py_trees.common import Status
 from rich.console import Console
 
 from sm_bt.bundled import path as bundled_model
-from sm_bt.engine.clock import Clock
 from sm_bt.engine.events import Cause, Event, EventKind
-from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.loader import load_model
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart
 from sm_bt.monitor import Monitor, terminal_console
-from sm_bt.sim import SimulatedSystem
-from sm_bt.sim.world import LaserDevice, World
-from sm_bt.trees import pilot, pilot_metacontrol
+from sm_bt.trees import pilot
 from sm_bt.trees.mission_xml import load_tree
-from sm_bt.trees.pilot_actions import BATTERY_OK, CompleteRound, NavigateTo, Recharge, comparison
+from sm_bt.trees.pilot import metacontrol as pilot_metacontrol
+from sm_bt.trees.pilot.actions import BATTERY_OK, CompleteRound, NavigateTo, Recharge, comparison
+from sm_bt.trees.pilot.platforms import Platform, SimulatedPlatform, ros_platform
+from sm_bt.trees.pilot.world import World
 from sm_bt.view import View, attach_view
 
-#: What Nav2's parameter files give the nodes before any mode is applied (the pilot's TB3 set-up).
-NAV2_PARAMETERS = {
-    "amcl": {"transform_tolerance": 2.0},
-    "controller_server": {"FollowPath.max_vel_x": 0.4, "FollowPath.max_speed_xy": 0.4},
-}
 TREES: dict[str, Callable[[int], py_trees.behaviour.Behaviour]] = {
     "pilot": lambda cycles: pilot.create_root(cycles),
     "metacontrol": lambda cycles: pilot_metacontrol.create_root(cycles),
@@ -67,9 +60,6 @@ def mission_root(tree: str, cycles: int, model: Model) -> py_trees.behaviour.Beh
     return load_tree(tree, model=model, inputs={"cycles": cycles})
 
 
-#: The manager's options on both platforms. One recovery attempt: a laser that fails again at once
-#: is then left to the tree.
-MANAGER_OPTIONS: dict[str, Any] = {"request_timeout": 10.0, "grace_period": 1.0, "recovery_attempts": 1}
 #: The default laser repair on simulated nodes (world seconds).
 REPAIR_AT = 40.0
 #: The node whose scans fail when the laser breaks.
@@ -108,85 +98,6 @@ class Options:
     linger: bool = False  # keep serving the view after the run until Ctrl-C
 
 
-class Platform(Protocol):
-    """What the demo runs on: the manager, how time passes between ticks, and the laser's node.
-
-    The demo owns the world and the tree; a platform supplies the manager (whose clock the
-    actions measure time with), lets ``tick`` seconds of that clock pass between ticks, and makes
-    the laser's node fail by itself while the laser is broken.
-    """
-
-    manager: ModeManager
-    #: Seconds of the manager's clock between ticks.
-    tick: float
-    #: "virtual" or "wall": what the manager's clock measures, for the narrative and the summary.
-    time_unit: str
-    #: What the nodes are, for the narrative ("simulated nodes", ...).
-    description: str
-
-    def advance(self, seconds: float) -> None:
-        """Let ``seconds`` of the manager's clock pass (the nodes act meanwhile)."""
-
-    def break_laser(self) -> None:
-        """The laser breaks: ``world.laser_ok`` becomes false and the node fails by itself while it is."""
-
-    def repair_laser(self) -> None:
-        """The laser works again (``world.laser_ok``); its node no longer fails."""
-
-    def serve(self, tree: py_trees.trees.BehaviourTree) -> None:
-        """Make ``tree`` visible to the platform's tools (on ROS: py_trees_ros snapshot streams)."""
-
-    def close(self) -> None:
-        """Release what the platform started; idempotent."""
-
-
-class SimulatedPlatform:
-    """Simulated nodes on a virtual clock, paced to ``speed`` virtual seconds per wall second
-    (0: as fast as possible); the laser through :class:`LaserDevice`."""
-
-    time_unit = "virtual"
-    description = "simulated nodes"
-
-    def __init__(self, model: Model, world: World, options: Options) -> None:
-        self.system = SimulatedSystem(model, transition_delay=0.2, parameter_delay=0.05,
-                                      initial_parameters=NAV2_PARAMETERS, record=False, **MANAGER_OPTIONS)
-        self.manager = self.system.manager
-        self.laser = LaserDevice(world, self.system.backend)
-        self.tick = options.tick
-        self.speed = options.speed
-
-    @property
-    def clock(self) -> Clock:
-        return self.system.clock
-
-    def advance(self, seconds: float) -> None:
-        self.system.run(seconds)
-        self.laser.update()
-        if self.speed > 0:
-            time.sleep(seconds / self.speed)
-
-    def break_laser(self) -> None:
-        self.laser.break_laser()
-
-    def repair_laser(self) -> None:
-        self.laser.repair()
-
-    def serve(self, tree: py_trees.trees.BehaviourTree) -> None:
-        pass  # no tools to serve without ROS
-
-    def close(self) -> None:
-        pass  # nothing runs in the background; the manager stays readable after the run
-
-
-def ros_platform(model: Model, world: World, options: Options, say: Callable[[str], None]) -> Platform:
-    """The pilot's nodes as rclpy lifecycle nodes in a child process, managed over ROS 2 from here
-    (:class:`sm_bt.ros.demo_nodes.RosPlatform`; imported here: it needs the ros extra)."""
-    from sm_bt.ros.demo_nodes import RosPlatform
-
-    return RosPlatform(model, str(model.path), world, manager_options=MANAGER_OPTIONS,
-                       initial_parameters=NAV2_PARAMETERS, say=say)
-
-
 @dataclass
 class RunTally:
     """What happened, for the summary."""
@@ -219,8 +130,8 @@ class Demo:
         self._held: list[tuple[str, str]] | None = None
         self._diverged: set[str] = set()  # nodes told to have left their target, until back
         self._laser_state = State.UNKNOWN
-        self.platform: Platform = ros_platform(self.model, self.world, options, self.note) if options.ros \
-            else SimulatedPlatform(self.model, self.world, options)
+        self.platform: Platform = ros_platform(self.model, self.world, self.note) if options.ros \
+            else SimulatedPlatform(self.model, self.world, tick=options.tick, speed=options.speed)
         try:
             self.manager = self.platform.manager
             self.clock = self.manager.clock
