@@ -11,15 +11,20 @@ sent that conflicts with one of the manager's own calls still in flight.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
-from sm_bt.engine.backend import CallResult, Done
-from sm_bt.engine.inference import NodeObservation
+from sm_bt.engine.backend import Backend, CallResult, Done
+from sm_bt.engine.clock import Clock
+from sm_bt.engine.inference import Inference, NodeObservation
 from sm_bt.engine.lifecycle import PlanError, Transition, TransitionEdge, plan
+from sm_bt.engine.serialiser import Serialiser
 from sm_bt.model.states import State
 from sm_bt.model.types import NodeMode, ParamValue
+
+log = logging.getLogger("sm_bt.manager")
 
 
 @dataclass(frozen=True)
@@ -293,3 +298,22 @@ class NodeDriver:
         if obs.state is goal.state and goal.mode is not None:
             return f"its parameters no longer match mode {goal.mode.name}"
         return f"now {obs.state.label}"
+
+
+class BackendIO:
+    """What node drivers do through the backend (:class:`DriverIO`): calls whose answers come back
+    serialised (inside an entry of the manager's, whatever thread the backend answers on)."""
+
+    def __init__(self, inference: Inference, clock: Clock, backend: Backend, serialiser: Serialiser) -> None:
+        self.observation = inference.observation
+        self.now = clock.now
+        self._backend = backend
+        self._serialiser = serialiser
+
+    def send_transition(self, node: str, transition: Transition, done: Done) -> None:
+        log.debug("  %s: %s", node, transition.label)
+        self._backend.change_state(node, transition, self._serialiser.serialised(done))
+
+    def send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
+        log.debug("  %s: set %d parameters", node, len(parameters))
+        self._backend.set_parameters(node, parameters, self._serialiser.serialised(done))

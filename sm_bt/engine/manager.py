@@ -26,12 +26,11 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 
-from sm_bt.engine.backend import Backend, Done
-from sm_bt.engine.clock import Clock
+from sm_bt.engine.backend import Backend
 from sm_bt.engine.divergences import Divergences
-from sm_bt.engine.drivers import NodeDriver
+from sm_bt.engine.drivers import BackendIO, NodeDriver
 from sm_bt.engine.events import Divergence, EventKind, Observer, Subscription
 from sm_bt.engine.executions import CLOSED, Executions
 from sm_bt.engine.hierarchy import Hierarchy, implied_targets
@@ -50,11 +49,12 @@ from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.responses import Responses
 from sm_bt.engine.serialiser import Serialiser
+from sm_bt.engine.settling import Settling
 from sm_bt.engine.snapshots import PartSnapshot
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, ParamValue, resolve_mode
+from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, resolve_mode
 
 __all__ = ["CLOSED", "REQUEST_TIMEOUT", "ModeManager", "NodeReturn"]
 
@@ -64,8 +64,6 @@ REQUEST_TIMEOUT = 30.0
 
 #: The primary state each requestable transition leads to.
 _GOAL = {step.transition: step.goal for step in REQUESTABLE}
-#: Settling passes before the manager reports that it could not settle (a bug, not a model).
-_MAX_PASSES = 100_000
 
 
 class ModeManager:
@@ -86,7 +84,7 @@ class ModeManager:
         self.model = model
         self.backend = backend
         self.clock = backend.clock
-        self._serial = Serialiser(self._settle, lambda: self._divergences.pending)
+        self._serial = Serialiser()
         self._lock = self._serial.lock
         self._hierarchy = Hierarchy.of(model)
         self._inference = Inference(model, self._hierarchy)
@@ -94,7 +92,7 @@ class ModeManager:
         self._reactions = Reactions(model, self._hierarchy, attempts=recovery_attempts, window=recovery_window,
                                     rules=rules, recovery=recovery)
         self._ledger = Ledger(model, self._inference, self._divergences, self._serial.outbox, self.clock)
-        io = _BackendIO(self._inference, self.clock, backend, self._serial)
+        io = BackendIO(self._inference, self.clock, backend, self._serial)
         self._drivers = {node.name: NodeDriver(node.name, io) for node in model.nodes}
         self._responses = Responses(self._ledger, self._divergences, self._reactions, self._serial, self.clock)
         renew = self._responses.renew_budgets
@@ -102,6 +100,7 @@ class ModeManager:
                                       self.clock, request_timeout=request_timeout, renew_budgets=renew)
         self._reports = NodeReports(self._ledger, self._divergences, self._executions, self._hierarchy,
                                     self._drivers, self._serial, self.clock, renew_budgets=renew)
+        self._serial.work = Settling(self._serial, self._divergences, self._responses, self._executions, self.clock)
         with self._serial:
             backend.attach([node.name for node in model.nodes], self._reports)
 
@@ -342,24 +341,6 @@ class ModeManager:
         obs = self._inference.observation(node)
         return node in self._reactions.gave_up or not obs.reachable or obs.state is State.FINALIZED
 
-    # -- settling -------------------------------------------------------------------------------------
-
-    def _settle(self) -> None:
-        """Work until nothing is left: the agenda, then the divergences that changed and the
-        reactions to faults (which may put more on the agenda)."""
-        for _ in range(_MAX_PASSES):
-            self._serial.run_agenda()
-            if not self._divergences.pending:
-                self._responses.schedule_grace()
-                return
-            now = self.clock.now()
-            changes, faults = self._divergences.evaluate(now)
-            for change in changes:
-                self._responses.changed(change.part, change.new, now)
-            for reaction in self._responses.react(faults) if faults else ():
-                self._executions.start(reaction.part, reaction.target, reaction.description, reaction.origin, None)
-        log.error("the manager did not settle after %d passes; stopped to stay responsive", _MAX_PASSES)
-
     def _check_part(self, part: str) -> None:
         if part not in self.model.parts:
             raise RequestError(f"unknown part {part!r}{did_you_mean(part, self.model.parts)} "
@@ -377,21 +358,3 @@ class ModeManager:
         if isinstance(transition, int):
             return Transition(transition)
         return transition_by_label(transition, current)
-
-
-class _BackendIO:
-    """What node drivers do through the backend: calls whose answers come back serialised."""
-
-    def __init__(self, inference: Inference, clock: Clock, backend: Backend, serialiser: Serialiser) -> None:
-        self.observation = inference.observation
-        self.now = clock.now
-        self._backend = backend
-        self._serialiser = serialiser
-
-    def send_transition(self, node: str, transition: Transition, done: Done) -> None:
-        log.debug("  %s: %s", node, transition.label)
-        self._backend.change_state(node, transition, self._serialiser.serialised(done))
-
-    def send_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
-        log.debug("  %s: set %d parameters", node, len(parameters))
-        self._backend.set_parameters(node, parameters, self._serialiser.serialised(done))

@@ -3,9 +3,10 @@
 Every entry point of :class:`~sm_bt.engine.manager.ModeManager` (a request, a backend report, a
 timer) runs inside ``with serialiser:``, one re-entrant lock, so reports may arrive from any
 thread. The outermost entry then *settles*: it has the manager work through what is left to do
-(``settle``: the agenda, then the divergences that changed and the reactions to faults), and only
-then tells the observers the events the outbox holds, in order. Observers may call back in: those
-calls only queue their effects, which the outermost entry settles before it returns.
+(:class:`~sm_bt.engine.settling.Settling`: the agenda, then the divergences that changed and the
+reactions to faults), and only then tells the observers the events the outbox holds, in order.
+Observers may call back in: those calls only queue their effects, which the outermost entry
+settles before it returns.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import threading
 from collections import deque
 from collections.abc import Callable, Iterable
 from types import TracebackType
+from typing import Protocol
 
 from sm_bt.engine.backend import CallResult, Done
 from sm_bt.engine.events import EventKind, Observer, Outbox, Subscription
@@ -22,21 +24,38 @@ from sm_bt.engine.events import EventKind, Observer, Outbox, Subscription
 log = logging.getLogger("sm_bt.manager")
 
 
+class Work(Protocol):
+    """The manager's work (:class:`~sm_bt.engine.settling.Settling`)."""
+
+    def settle(self) -> None:
+        """Do what is left to do."""
+
+    def pending(self) -> bool:
+        """Whether there is work left that ``settle`` would do (an observer may have left some)."""
+
+
+class _Idle:
+    def settle(self) -> None:
+        pass
+
+    def pending(self) -> bool:
+        return False
+
+
 class Serialiser:
     """``with serialiser:`` around every entry point (a class, not a generator: entered on every
-    report). ``settle()`` is the manager's work; ``pending()`` says whether an observer left some."""
+    report); :attr:`work` is what the outermost entry settles (given once the manager is built)."""
 
-    __slots__ = ("_agenda", "_depth", "_pending", "_settle", "_subscriptions", "closed", "lock", "outbox")
+    __slots__ = ("_agenda", "_depth", "_subscriptions", "closed", "lock", "outbox", "work")
 
-    def __init__(self, settle: Callable[[], None], pending: Callable[[], bool]) -> None:
+    def __init__(self) -> None:
         self.lock = threading.RLock()
         self.outbox = Outbox()
         #: Once set, the outermost entry no longer settles (the manager is detached).
         self.closed = False
         self._agenda: deque[Callable[[], None]] = deque()
         self._depth = 0
-        self._settle = settle
-        self._pending = pending
+        self.work: Work = _Idle()
         # A tuple, replaced on (un)subscribe: notifying iterates it with no copy.
         self._subscriptions: tuple[Subscription, ...] = ()
 
@@ -83,7 +102,7 @@ class Serialiser:
     def _settle_and_notify(self) -> None:
         self._depth += 1
         try:
-            self._settle()
+            self.work.settle()
             while (event := self.outbox.pop()) is not None:
                 for subscription in self._subscriptions:
                     if subscription.everything or subscription.wants(event):
@@ -91,8 +110,8 @@ class Serialiser:
                             subscription.callback(event)
                         except Exception:  # an observer's bug must not break the manager
                             log.exception("observer %r failed on %s", subscription.callback, event.kind.value)
-                if self._agenda or self._pending():  # an observer called in
-                    self._settle()
+                if self._agenda or self.work.pending():  # an observer called in
+                    self.work.settle()
         finally:
             self._depth -= 1
 

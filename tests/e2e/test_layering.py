@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import ast
+import contextlib
+import io
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -131,3 +134,29 @@ def test_the_manager_command_without_rclpy_says_how_to_install_it() -> None:
     assert result.returncode == 1
     assert "ROS 2 is not available here" in result.stderr and "[ros]" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_a_request_from_the_monitor_enters_the_manager_at_most_three_times() -> None:
+    """The manager is a façade: following one request of ``sm-bt monitor`` (on simulated nodes),
+    calls into ``engine/manager.py`` from elsewhere are the request itself and reading the result;
+    settling, the drivers' calls and the backend's reports go to the modules that own them."""
+    from sm_bt.cli import main
+
+    manager_py = str(ROOT / "sm_bt" / "engine" / "manager.py")
+    entered: set[str] = set()
+
+    def profile(frame: Any, event: str, arg: Any) -> None:
+        if event == "call" and frame.f_code.co_filename == manager_py and frame.f_back is not None \
+                and frame.f_back.f_code.co_filename != manager_py:
+            entered.add(frame.f_code.co_name)
+
+    sys.setprofile(profile)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            code = main(["monitor", "pilot", "--change", "pilot=f_normal_mode", "--once", "--json", "--speed", "0"])
+    finally:
+        sys.setprofile(None)
+    assert code == 0
+    setting_up = {"__init__", "subscribe", "close"}
+    assert entered & setting_up  # the profile saw the manager at all
+    assert len(entered - setting_up) <= 3, sorted(entered)
