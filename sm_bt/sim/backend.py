@@ -6,19 +6,12 @@ deterministic. Requests reach a node through the clock (delay 0) and never answe
 call; callbacks take ``transition_delay`` (``error_delay`` for ``on_error``), parameter sets take
 ``parameter_delay``.
 
-Faults are injected from outside (tests, demos) and each one is recorded in :attr:`SimBackend.events`:
-:meth:`~SimBackend.fail_next`, :meth:`~SimBackend.hang_next`, :meth:`~SimBackend.reject_parameters`,
-:meth:`~SimBackend.set_parameter`, :meth:`~SimBackend.trigger`, :meth:`~SimBackend.crash`,
-:meth:`~SimBackend.vanish`, :meth:`~SimBackend.restart`, :meth:`~SimBackend.start_late`. Armed faults
-and delay overrides belong to the simulation, not to the node process: they survive a restart
-(:meth:`~SimBackend.clear_faults` disarms them). Fault methods act at once (their reports to the
-listener come from inside the call); only the Backend requests are deferred.
-
-Reports to the listener come at once unless ``report_delay`` is set: then every report (appearing,
-state, parameters, vanishing) comes that many seconds after it happened, in order, while answers to
-requests still come at once. That is how ROS 2 can deliver them (a ``change_state`` answer before the
-node's ``transition_event``, a ``set_parameters`` answer before its ``/parameter_events``), and the
-engine must cope with either order.
+Faults are injected from outside (tests, demos: the methods of "configuration and fault
+injection") and each one is recorded in :attr:`SimBackend.events`. Armed faults and delays belong
+to the simulation, not to the node process (:mod:`sm_bt.sim.faults`). Fault methods act at once
+(their reports to the listener come from inside the call); only the Backend requests are deferred.
+Reports may come ``report_delay`` s late, after the answers (:mod:`sm_bt.sim.reports`), as ROS 2
+can deliver them.
 
 Nodes named in ``plain`` have no lifecycle services (parameters only), as a node without
 ``rclcpp_lifecycle`` on ROS: they are reported ``active`` with ``lifecycle=False``, accept parameter
