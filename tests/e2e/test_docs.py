@@ -1,10 +1,11 @@
-"""Every example in README.md runs as written, so none can rot.
+"""Every example in README.md and in the documentation's pages (docs/**/*.md) runs as written, so
+none can rot.
 
 Each fenced block is tested by its language and by the directive in an HTML comment on the line
-before it (``<!-- readme-test: ... -->``, invisible on the rendered page):
+before it (``<!-- readme-test: ... -->``, the same on every page, invisible on the rendered page):
 
-- ``python``: run in order in one namespace (as a reader pastes them into one session), on the
-  simulated backend; ``ros``: run in a fresh interpreter with the pilot's simulated rclpy nodes
+- ``python``: the blocks of one page run in order in one namespace (as a reader pastes them into
+  one session), on the simulated backend; ``ros``: run in a fresh interpreter with the pilot's simulated rclpy nodes
   up; ``pytest``: a test file of a user's own, run by pytest (every test in it must pass);
   ``compile (why)``: compiled only, for what needs software no package index has;
 - ``yaml``: loaded as a model (strictly); ``file PATH``: the file holds exactly the block and
@@ -19,6 +20,8 @@ before it (``<!-- readme-test: ... -->``, invisible on the rendered page):
   for any number of lines; ``layout``: every path named exists.
 
 A block with no test and no reason fails :func:`test_every_block_is_tested_or_says_why_not`.
+A failure names the page and the line of the block's opening fence; a traceback from a Python
+block gives the page's own line numbers.
 """
 
 from __future__ import annotations
@@ -44,6 +47,10 @@ from sm_bt.trees.mission_xml import check_tree
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
+#: Every page with examples: the front page, then the documentation's pages.
+PAGES = (README, *sorted((ROOT / "docs").rglob("*.md")))
+#: The front page stays a front page.
+README_MAX_LINES = 300
 BIN = Path(sys.executable).parent
 DIRECTIVE = re.compile(r"^<!-- readme-test: (.*) -->$")
 #: Directives each language accepts, with what they capture; a block without one uses "".
@@ -63,13 +70,19 @@ TRANSCRIPT_TIMEOUT = 120.0
 
 @dataclass(frozen=True)
 class Block:
+    page: str  # the page's path from the repository's root
     line: int  # of the opening fence, 1-based
     language: str
     text: str
     directive: str
 
     def __str__(self) -> str:
-        return f"README.md:{self.line} ({self.language})"
+        return f"{self.page}:{self.line} ({self.language})"
+
+    @property
+    def code(self) -> str:
+        """The block's text on the lines it has in its page (for tracebacks that name them)."""
+        return "\n" * self.line + self.text
 
     @property
     def kind(self) -> tuple[str, tuple[str, ...]]:
@@ -84,19 +97,25 @@ class Block:
 
 @cache
 def blocks() -> tuple[Block, ...]:
-    lines = README.read_text(encoding="utf-8").splitlines()
+    return tuple(block for page in PAGES for block in page_blocks(page))
+
+
+def page_blocks(path: Path) -> list[Block]:
+    page = path.relative_to(ROOT).as_posix()
+    lines = path.read_text(encoding="utf-8").splitlines()
     found: list[Block] = []
     index = 0
     while index < len(lines):
         if lines[index].startswith("```"):
             start = index
-            end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("```"))
+            end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("```")), None)
+            assert end is not None, f"{page}:{start + 1}: a block that never ends"
             before = DIRECTIVE.match(lines[start - 1]) if start else None
-            found.append(Block(start + 1, lines[start][3:].strip(), "\n".join(lines[start + 1:end]) + "\n",
+            found.append(Block(page, start + 1, lines[start][3:].strip(), "\n".join(lines[start + 1:end]) + "\n",
                                before.group(1) if before else ""))
             index = end
         index += 1
-    return tuple(found)
+    return found
 
 
 def of_kind(*kinds: str) -> list[Block]:
@@ -111,11 +130,12 @@ def _kind_or_none(block: Block) -> str | None:
 
 
 def by_line(values: list[Block]) -> Callable[..., object]:
-    return pytest.mark.parametrize("block", values, ids=[f"line{block.line}" for block in values])
+    return pytest.mark.parametrize("block", values, ids=[f"{block.page}:{block.line}" for block in values])
 
 
 def test_every_block_is_tested_or_says_why_not() -> None:
-    assert len(blocks()) >= 20  # the parser found the README's blocks
+    assert len(blocks()) >= 20  # the parser found the pages' blocks
+    assert {block.page for block in blocks()} >= {"README.md", "docs/first-model.md", "docs/cli.md"}
     problems = []
     for block in blocks():
         try:
@@ -125,22 +145,48 @@ def test_every_block_is_tested_or_says_why_not() -> None:
     assert not problems, "\n".join(problems)
 
 
+def test_the_readme_is_a_front_page() -> None:
+    lines = len(README.read_text(encoding="utf-8").splitlines())
+    assert lines <= README_MAX_LINES, f"README.md has {lines} lines: move the details to a page of docs/"
+
+
 # -- Python ---------------------------------------------------------------------------------------------
 
 
-def test_python_examples_run_in_order_on_the_simulated_backend(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.chdir(ROOT)  # the examples name files relative to the repository, as a reader runs them
-    namespace: dict[str, object] = {"__name__": "__readme__"}
-    printed = io.StringIO()
-    for block in of_kind("run"):
-        with contextlib.redirect_stdout(printed):
-            exec(compile(block.text, str(block), "exec"), namespace)  # the README's own code
-    output = printed.getvalue().splitlines()
-    # What the first example's comments promise.
+def _front_page_promises(namespace: dict[str, object], output: list[str]) -> None:
+    assert "Status.SUCCESS active.FAST" in output
+
+
+def _first_mission_promises(namespace: dict[str, object], output: list[str]) -> None:
     request = namespace["request"]
     assert isinstance(request, sm_bt.Request) and request.succeeded, request
     assert output.count("active.f_normal_mode") == 2
     assert "[]" in output  # no divergences
+
+
+#: What the comments of a page's examples promise, beyond running.
+PROMISES: dict[str, Callable[[dict[str, object], list[str]], None]] = {
+    "README.md": _front_page_promises,
+    "docs/first-mission.md": _first_mission_promises,
+}
+PYTHON_PAGES = list(dict.fromkeys(block.page for block in of_kind("run")))
+
+
+@pytest.mark.parametrize("page", PYTHON_PAGES)
+def test_python_examples_of_a_page_run_in_order_on_the_simulated_backend(
+        page: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(ROOT)  # the examples name files relative to the repository, as a reader runs them
+    namespace: dict[str, object] = {"__name__": "__docs__"}
+    printed = io.StringIO()
+    for block in of_kind("run"):
+        if block.page == page:
+            with contextlib.redirect_stdout(printed):
+                exec(compile(block.code, block.page, "exec"), namespace)  # the page's own code
+    PROMISES.get(page, lambda namespace, output: None)(namespace, printed.getvalue().splitlines())
+
+
+def test_the_promises_are_of_pages_with_python_examples() -> None:
+    assert set(PROMISES) <= set(PYTHON_PAGES)
 
 
 @by_line(of_kind("pytest"))
@@ -148,7 +194,7 @@ def test_pytest_examples_pass_as_a_users_own_test_file(block: Block, tmp_path: P
     """Run as a user runs them: a test file of their own, pytest started from the repository (the
     example names the model relative to it), nothing of this suite's configuration, the plugin
     found through its entry point."""
-    test_file = tmp_path / "test_readme_example.py"
+    test_file = tmp_path / "test_docs_example.py"
     test_file.write_text(block.text, encoding="utf-8")
     done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-c", os.devnull,
                            "--rootdir", str(tmp_path), str(test_file)], cwd=ROOT, capture_output=True, text=True,
@@ -159,13 +205,13 @@ def test_pytest_examples_pass_as_a_users_own_test_file(block: Block, tmp_path: P
 
 @by_line(of_kind("compile"))
 def test_python_examples_that_need_other_software_compile(block: Block) -> None:
-    compile(block.text, str(block), "exec")
+    compile(block.code, block.page, "exec")
 
 
 @by_line(of_kind("ros"))
 def test_ros_python_examples_run_against_the_simulated_rclpy_nodes(block: Block, node_processes: Starter) -> None:
     node_processes("pilot")
-    done = subprocess.run([sys.executable, "-c", block.text], cwd=ROOT, capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-c", block.code], cwd=ROOT, capture_output=True, text=True,
                           timeout=TRANSCRIPT_TIMEOUT, check=False)
     assert done.returncode == 0, f"{block} failed:\n{done.stdout}{done.stderr}"
     assert "Normal: SUCCESS" in done.stdout, done.stdout
@@ -206,7 +252,7 @@ def test_xml_examples_are_the_files_they_show_and_check_clean(block: Block) -> N
 
 @by_line(of_kind("dds profile"))
 def test_fast_dds_profiles_are_the_ones_the_tests_use(block: Block) -> None:
-    """What the README advises is what the tests measured with: the block's writer settings are
+    """What the page advises is what the tests measured with: the block's writer settings are
     in the profile that the named module gives its processes."""
     (path,) = block.kind[1]
     import xml.etree.ElementTree as ElementTree
@@ -279,17 +325,17 @@ def run_transcript(block: Block) -> None:
                               stderr=subprocess.STDOUT, text=True, timeout=TRANSCRIPT_TIMEOUT, check=False)
         actual = [line.rstrip() for line in done.stdout.splitlines()]
         assert matches(expected, actual), (f"{block}: `{command}` (exit {done.returncode}) printed\n"
-                                           + "\n".join(actual) + "\n\nand the README shows\n" + "\n".join(expected))
+                                           + "\n".join(actual) + f"\n\nand {block.page} shows\n" + "\n".join(expected))
 
 
 @pytest.mark.long
 @by_line(of_kind("transcript"))
-def test_transcripts_print_what_the_readme_shows(block: Block) -> None:
+def test_transcripts_print_what_the_page_shows(block: Block) -> None:
     run_transcript(block)
 
 
 @by_line(of_kind("ros transcript"))
-def test_ros_transcripts_print_what_the_readme_shows(
+def test_ros_transcripts_print_what_the_page_shows(
         block: Block, start_manager: Callable[..., ManagerProcess], node_processes: Starter) -> None:
     (model,) = block.kind[1]
     manager = start_manager(model=model)
@@ -310,4 +356,4 @@ def test_the_wildcard_matcher_can_fail() -> None:
     assert matches(["…"], [])
     assert not matches(["a …", "z"], ["a b", "c", "z"])
     assert not matches(["x"], ["x", "y"])
-    assert not matches(["a.c"], ["abc"])  # no regular expressions in the README's text
+    assert not matches(["a.c"], ["abc"])  # no regular expressions in the pages' text
