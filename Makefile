@@ -1,4 +1,5 @@
 # Two entry points: `make demo` (the main job) and `make test`. Both build .venv themselves.
+# `make docs` builds the documentation site (docs/, mkdocs.yml) into build/site.
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
@@ -13,12 +14,12 @@ ROS_IFACE_SRCS := $(wildcard interfaces/*/*.txt interfaces/*/*.toml interfaces/*
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export ROS_LOG_DIR := $(CURDIR)/build/ros_log
 
-.PHONY: demo test lint clean
+.PHONY: demo test lint docs clean
 
 $(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh sm_bt/view/assets.py
 	@echo "sm_bt: creating $(VENV) and installing the pinned dependencies (ROS 2 Jazzy wheels included; about a minute the first time) ..."
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,ros]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,ros,docs]'
 	@echo "sm_bt: dependencies installed; now the interface packages (built once, then cached)"
 	bash tools/ensure_interfaces.sh $(VENV)
 	$(BIN)/python -m sm_bt.view.assets
@@ -35,7 +36,7 @@ demo-ros: $(STAMP)
 	$(BIN)/sm-bt demo --ros
 
 # The suite in PYTEST_WORKERS parallel workers (pytest-xdist), with Chromium installed while the venv
-# is built, then lint; prints the wall time of each step (tools/run_tests.sh).
+# is built, then lint and the documentation's build; prints the wall time of each step (tools/run_tests.sh).
 PYTEST_WORKERS ?= 4
 test:
 	@mkdir -p $(ROS_LOG_DIR)
@@ -55,7 +56,7 @@ stress: $(STAMP)
 		tests/engine/test_manager_properties.py tests/model/test_model_fuzz.py tests/e2e/stress_partitions.py \
 		tests/e2e/stress_long_transitions.py tests/ros/test_ros_topics_property.py
 
-# The performance goals (README, "Performance"): a table with each goal, build/bench/results.json
+# The performance goals (docs/performance.md): a table with each goal, build/bench/results.json
 # and build/bench/scaling.png; exit status 1 if a goal is not met. About 3 minutes on 2 cores.
 .PHONY: bench
 bench: $(STAMP)
@@ -65,8 +66,9 @@ bench: $(STAMP)
 # sm-bt manager side by side with the reference's mode_manager (micro-ROS/system_modes, C++), built by
 # tools/reference/build.sh once per source hash (about 10 minutes the first time; cached under
 # ~/.cache/sm_bt/reference/): the same plain-rclpy scenarios on both, a side-by-side report in
-# build/interop/report.md (README, "sm_bt and the reference, measured"), then every README CLI example
-# against the reference. Exit status 1 if sm-bt manager does not do what a scenario asks.
+# build/interop/report.md (docs/reference.md, "sm_bt and the reference, measured"), then every CLI
+# example of the documentation against the reference. Exit status 1 if sm-bt manager does not do
+# what a scenario asks.
 # Without access to github.com, SM_BT_GIT_MIRRORS names a folder of git mirrors of the sources.
 .PHONY: interop
 interop: $(STAMP)
@@ -77,19 +79,30 @@ interop: $(STAMP)
 	SM_BT_REFERENCE="$$prefix" SM_BT_TESTS_NEED_ALL=1 PYTHONPATH=tests/support \
 		$(BIN)/python -m pytest -q -p no:cacheprovider tests/interop/interop_cli.py
 
-# mypy cannot follow the editable install's mapping of behaviours/ and trees/ onto sm_bt.*, so it
-# checks a symlinked view of the installed layout (build/typecheck/sm_bt).
+# mypy and griffe (the API reference's reader) cannot follow the editable install's mapping of
+# behaviours/, trees/ and models/ onto sm_bt.*, so they read a symlinked view of the installed
+# layout: $(call installed_layout,DIR) makes DIR/sm_bt.
+define installed_layout
+	rm -rf $(1) && mkdir -p $(1)/sm_bt
+	for f in sm_bt/*; do ln -s "$(CURDIR)/$$f" $(1)/sm_bt/; done
+	ln -s "$(CURDIR)/behaviours" $(1)/sm_bt/behaviours
+	ln -s "$(CURDIR)/trees" $(1)/sm_bt/trees
+	ln -s "$(CURDIR)/models" $(1)/sm_bt/models
+endef
 TYPECHECK := build/typecheck
 
 lint: $(STAMP)
-	$(BIN)/ruff check sm_bt behaviours trees models tests bench
-	rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/sm_bt
-	for f in sm_bt/*; do ln -s "$(CURDIR)/$$f" $(TYPECHECK)/sm_bt/; done
-	ln -s "$(CURDIR)/behaviours" $(TYPECHECK)/sm_bt/behaviours
-	ln -s "$(CURDIR)/trees" $(TYPECHECK)/sm_bt/trees
-	ln -s "$(CURDIR)/models" $(TYPECHECK)/sm_bt/models
+	$(BIN)/ruff check sm_bt behaviours trees models tests bench tools/docs
+	$(call installed_layout,$(TYPECHECK))
 	ln -s "$(CURDIR)/bench" $(TYPECHECK)/bench
 	cd $(TYPECHECK) && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml -p sm_bt -p bench
+
+# The documentation site: docs/*.md, README.md as its home page, and an API reference read from the
+# docstrings (mkdocstrings, through build/docs/src), built into build/site with warnings as errors.
+# NO_MKDOCS_2_WARNING: mkdocs-material's notice about MkDocs 2.0, printed on every build.
+docs: $(STAMP)
+	$(call installed_layout,build/docs/src)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 clean:
 	rm -rf $(VENV) build *.egg-info

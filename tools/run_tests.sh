@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # What `make test` runs: the environment (Chromium installed meanwhile), the suite in parallel
-# workers, then ruff and mypy; at the end, the wall time of each step, whatever the outcome.
+# workers, then ruff and mypy, then the documentation's build (warnings are errors); at the end,
+# the wall time of each step, whatever the outcome.
 #
 #   tools/run_tests.sh [PYTEST ARGS...]     (from the Makefile: MAKE, VENV, STAMP, PYTEST_WORKERS)
 #
@@ -14,7 +15,7 @@ venv="${VENV:-.venv}"
 stamp="${STAMP:-$venv/.installed}"
 workers="${PYTEST_WORKERS:-4}"
 start=$SECONDS
-declare -A took=([environment]=0 [tests]=0 [lint]=0)
+declare -A took=([environment]=0 [tests]=0 [lint]=0 [docs]=0)
 step="environment" since=$SECONDS
 
 next_step() {  # next_step NAME: the step so far took its time
@@ -24,9 +25,11 @@ next_step() {  # next_step NAME: the step so far took its time
 
 report() {
   local status=$?
+  local failed=""
+  [[ $status == 0 ]] || failed="; failed in the $step step"
   took[$step]=$((SECONDS - since))
   echo "make test: $((SECONDS - start)) s of wall time (environment ${took[environment]} s," \
-       "tests ${took[tests]} s, lint ${took[lint]} s)$([[ $status == 0 ]] || echo "; failed in the $step step")"
+       "tests ${took[tests]} s, lint ${took[lint]} s, docs ${took[docs]} s)$failed"
 }
 trap report EXIT
 
@@ -47,3 +50,6 @@ SM_BT_TESTS_NEED_ALL=1 "$venv/bin/python" -m pytest -q -n "$workers" --durations
 
 next_step lint
 "$make" --no-print-directory lint
+
+next_step docs
+"$make" --no-print-directory docs
