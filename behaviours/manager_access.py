@@ -8,9 +8,11 @@ Three ways, the first that applies wins:
 3. ``tree.setup(manager=manager)``: py_trees' way of handing runtime objects to ``setup``.
 
 The first two also work where ``setup`` gets no keyword arguments (``setup_with_descendants()``,
-py_trees_ros before 2.3). Once it has its manager, a behaviour checks the part (and mode) it was
-built for against the manager's model, so a typo fails at set-up with the part's real names, not
-at the first tick.
+py_trees_ros before 2.3), and after ``setup``: py_trees_ros makes the tree's node in ``setup``, so
+a runtime on that node, and its manager, can only come afterwards. Once it has its manager, a
+behaviour checks the part (and mode) it was built for against the manager's model: at set-up
+when the manager is known then (a typo fails with the part's real names before anything runs),
+otherwise when the behaviour first needs it.
 """
 
 from __future__ import annotations
@@ -111,11 +113,11 @@ class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False)
     """A behaviour that works through a :class:`ModeManager`.
 
     ``manager`` (optional) is the behaviour's own; otherwise :func:`attach_manager` on an
-    ancestor, otherwise ``setup(manager=...)``. ``setup`` finds the manager and validates the
-    behaviour's configuration against the model (see :meth:`check_model`): it raises :class:`NotSetUp` when there is
-    no manager and ``ValueError`` for a part or mode the model does not have. A behaviour that
-    was never set up (a subtree inserted at run time) does the same when it first needs the
-    manager.
+    ancestor, otherwise ``setup(manager=...)``. ``setup`` validates the behaviour's configuration
+    against the model of the manager it finds (see :meth:`check_model`: ``ValueError`` for a part or
+    mode the model does not have); with none yet (a manager attached after set-up), the behaviour
+    finds and checks it when it first needs it, and raises :class:`NotSetUp` there if there is
+    still none.
 
     Every sm_bt behaviour is a py_trees ports node (:class:`~py_trees.ports.PortsMixin`), so
     py_trees' XML parser builds it by its class name; ``kwargs`` go to it (the parser's
@@ -158,9 +160,8 @@ class ManagerBehaviour(PortsMixin, py_trees.behaviour.Behaviour, register=False)
     def setup(self, **kwargs: Any) -> None:
         given = kwargs.get("manager")
         manager = self._own or attached_manager(self) or given
-        if manager is None:
-            raise NotSetUp(_hint(self))
-        self._use(_require_manager(self.qualified_name, manager))
+        if manager is not None:  # else attached later, before the first tick (py_trees_ros' order)
+            self._use(_require_manager(self.qualified_name, manager))
 
     def _use(self, manager: ModeManager) -> None:
         self.check_model(manager.model)

@@ -211,11 +211,14 @@ def factories(part: str, mode: str, names: list[str] = NAMES) -> list[Factory]:
 
 
 @pytest.mark.parametrize("factory", factories("pilot", "f_normal_mode"), ids=NAMES)
-def test_setting_up_without_a_manager_names_the_behaviour_and_the_fix(factory: Factory) -> None:
+def test_a_tree_set_up_without_a_manager_names_the_behaviour_and_the_fix_when_ticked(factory: Factory) -> None:
+    """Setting up without a manager is allowed (py_trees_ros makes the node a runtime needs in
+    ``setup``, so the manager comes after it); the first tick still without one says what to do."""
     behaviour = factory()
     tree = py_trees.trees.BehaviourTree(py_trees.composites.Sequence("Root", memory=True, children=[behaviour]))
+    tree.setup()
     with pytest.raises(NotSetUp) as raised:
-        tree.setup()
+        tree.tick()
     message = str(raised.value)
     assert message.startswith(f"{behaviour.qualified_name}: no mode manager")
     assert "tree.setup(manager=" in message

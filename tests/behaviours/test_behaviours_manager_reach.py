@@ -43,6 +43,27 @@ def test_a_behaviour_given_its_manager_needs_no_setup_kwargs(rig: SimulatedSyste
     assert rig.manager.actual("pilot").state is State.ACTIVE
 
 
+def test_a_manager_attached_after_setup_serves_the_whole_tree(rig: SimulatedSystem) -> None:
+    """py_trees_ros' order: the tree is set up first (that makes its node), the runtime on that node
+    comes next, and only then its manager can be attached; the first tick finds and checks it."""
+    root = py_trees.composites.Sequence("Mission", memory=True, children=[
+        ChangeMode("Normal", "pilot", "f_normal_mode"), ModeIs("Normal?", "pilot", "f_normal_mode")])
+    tree = _NoKwargsTree(root)
+    tree.setup()
+    attach_manager(root, rig.manager)
+    rig.tick_until(tree, lambda: root.status is Status.SUCCESS)
+    assert str(rig.manager.actual("pilot")) == "active.f_normal_mode"
+
+
+def test_a_typo_in_a_tree_set_up_before_its_manager_fails_at_the_first_tick(rig: SimulatedSystem) -> None:
+    root = ChangeMode("Normal", "pilot", "f_nromal_mode")
+    tree = _NoKwargsTree(root)
+    tree.setup()
+    attach_manager(root, rig.manager)
+    with pytest.raises(ValueError, match="f_normal_mode"):
+        tree.tick()
+
+
 def test_attach_manager_reaches_every_behaviour_of_the_subtree_through_setup_with_descendants(
         rig: SimulatedSystem) -> None:
     root = py_trees.composites.Sequence("Mission", memory=True, children=[
@@ -84,8 +105,9 @@ def test_an_own_manager_wins_over_an_attached_one_which_wins_over_setup(rig: Sim
 
 def test_without_any_manager_the_error_says_the_three_ways() -> None:
     behaviour = OnDivergence("Diverges?", "pilot")
+    behaviour.setup_with_descendants()
     with pytest.raises(NotSetUp) as raised:
-        behaviour.setup_with_descendants()
+        behaviour.tick_once()
     message = str(raised.value)
     for way in ("attach_manager(root, manager)", "tree.setup(manager=manager)", "manager= argument"):
         assert way in message
