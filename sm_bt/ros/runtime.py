@@ -115,11 +115,13 @@ class RosRuntime:
             self.node = node
             node_name = node.get_name()
         self.clock = WallClock("sm_bt-ros-clock")
-        # The helper nodes have no parameters: without parameter services they wake over fewer entities.
-        self.backend_node = rclpy.create_node(f"{node_name}_backend", context=self.context,
-                                              start_parameter_services=False)
-        self.watch_node = rclpy.create_node(f"{node_name}_watch", context=self.context,
-                                            start_parameter_services=False)
+        # The helper nodes have no parameters: without parameter services they wake over fewer
+        # entities. They ignore the context's command-line arguments, whose remaps are the main
+        # node's (`-r __node:=mission` would give all three its name), and sit in its namespace.
+        helper: dict[str, Any] = {"context": self.context, "start_parameter_services": False,
+                                  "use_global_arguments": False, "namespace": self.node.get_namespace()}
+        self.backend_node = rclpy.create_node(f"{node_name}_backend", **helper)
+        self.watch_node = rclpy.create_node(f"{node_name}_watch", **helper)
         self.executor = SingleThreadedExecutor(context=self.context)
         if self._owns_node:  # an application's node is spun by the application
             self.executor.add_node(self.node)

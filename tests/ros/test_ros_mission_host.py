@@ -29,9 +29,10 @@ MISSION = """<root main_tree_to_execute="Mission">
 """
 
 
-def _host(tmp_path: Path, *parameters: str, positional: tuple[str, ...] = ()) -> subprocess.Popen[str]:
-    """``sm-bt mission [POSITIONAL...] --ros-args -p PARAMETER...``"""
-    command = [sys.executable, "-m", "sm_bt.cli", "mission", *positional, "--ros-args"]
+def _host(tmp_path: Path, *parameters: str, positional: tuple[str, ...] = (),
+          ros_args: tuple[str, ...] = ()) -> subprocess.Popen[str]:
+    """``sm-bt mission [POSITIONAL...] --ros-args [ROS_ARGS...] -p PARAMETER...``"""
+    command = [sys.executable, "-m", "sm_bt.cli", "mission", *positional, "--ros-args", *ros_args]
     for parameter in parameters:
         command += ["-p", parameter]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
@@ -56,13 +57,16 @@ def test_a_hosted_mission_serves_the_interface_and_stops_cleanly_on_sigint(
         node_processes: Starter, observer: RosContext, tmp_path: Path) -> None:
     node_processes("pilot")
     (tmp_path / "mission.xml").write_text(MISSION.format(last='<Running name="Hold on"/>'))
-    host = _host(tmp_path, "model:=pilot", "tree:=mission.xml", "rate:=20.0")
+    host = _host(tmp_path, "model:=pilot", "tree:=mission.xml", "rate:=20.0", ros_args=("-r", "__node:=mission"))
     try:
         def mode() -> str:
             return str(observer.call(GetMode, "/pilot/get_mode", GetMode.Request(), timeout=2.0).current_mode)
 
         wait_until(lambda: host.poll() is not None or mode() == "f_slow_mode", 30.0, "pilot in f_slow_mode")
         assert host.poll() is None, host.stderr.read() if host.stderr else ""
+        # The remap names the mission's node only; its helper nodes keep names of their own.
+        names = sorted(name for name in observer.node.get_node_names() if name.startswith("mission"))
+        assert names == ["mission", "mission_backend", "mission_watch"], names
     finally:
         code, err = _stop(host)
     assert code == 0, err
