@@ -8,6 +8,8 @@ tree snapshots show who reads and writes it.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -15,20 +17,24 @@ import py_trees
 from py_trees.common import Status
 
 from sm_bt.behaviours.manager_access import ManagerBehaviour
-from sm_bt.engine.clock import Clock
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model
+
+#: Clock readings above this are seconds since the epoch (a wall clock), below it a virtual clock's.
+_EPOCH_READINGS = 1e8
 
 
 @dataclass(frozen=True)
 class PartStatus:
     """What the blackboard holds for one part; ``str()`` tells it in one line, as watchers and
     viewers show it: ``active.f_slow_mode (target active.f_slow_mode)``, ``unconfigured (target
-    active: fault for 1.1 s)``.
+    active: fault since 14:02:31)``.
 
     ``divergence`` is the cause (``"fault"``, ``"grace"``, ...) while the part is off its target,
-    else ``None``; ``since`` is when that began (the manager's clock), and ``clock`` lets ``str()``
-    say for how long. Every field has a default, so blackboard tools list them all.
+    else ``None``; ``since`` is when that began (the manager's clock: a wall clock's time of day, or
+    ``t=12.3 s`` on a virtual clock). Plain data only, so py_trees_ros can copy and pickle it to
+    tell blackboard watchers what changed; every field has a default, so blackboard tools list
+    them all.
     """
 
     part: str = ""
@@ -38,7 +44,6 @@ class PartStatus:
     target_mode: str | None = None
     divergence: str | None = None
     since: float | None = field(default=None, compare=False)
-    clock: Clock | None = field(default=None, compare=False, repr=False)
 
     @property
     def state_mode(self) -> str:
@@ -58,10 +63,11 @@ class PartStatus:
             return f"{self.state_mode} (no target)"
         if self.divergence is None:
             return f"{self.state_mode} (target {target})"
-        lasted = ""
-        if self.since is not None and self.clock is not None:
-            lasted = f" for {max(0.0, self.clock.now() - self.since):.1f} s"
-        return f"{self.state_mode} (target {target}: {self.divergence}{lasted})"
+        since = ""
+        if self.since is not None:
+            since = f" since {time.strftime('%H:%M:%S', time.localtime(self.since))}" \
+                if self.since > _EPOCH_READINGS else f" since t={self.since:.1f} s"
+        return f"{self.state_mode} (target {target}: {self.divergence}{since})"
 
 
 def part_status(manager: ModeManager, part: str) -> PartStatus:
@@ -75,7 +81,6 @@ def part_status(manager: ModeManager, part: str) -> PartStatus:
         target_mode=target.mode if target else None,
         divergence=divergence.cause.value if divergence else None,
         since=divergence.since if divergence else None,
-        clock=manager.clock,
     )
 
 
@@ -100,10 +105,14 @@ class ModesToBlackboard(ManagerBehaviour):
 
     def setup(self, **kwargs: Any) -> None:
         super().setup(**kwargs)
-        self.parts = list(self.parts if self.parts is not None else self.manager.model.parts)
+        self._written.clear()
+        if self.parts is not None or self._manager is not None:  # else the manager names them later
+            self._register(self.manager.model.parts if self.parts is None else self.parts)
+
+    def _register(self, parts: Iterable[str]) -> None:
+        self.parts = list(parts)
         for part in self.parts:
             self.blackboard.register_key(part, access=py_trees.common.Access.WRITE)
-        self._written.clear()
 
     def check_model(self, model: Model) -> None:
         for part in self.parts or ():
@@ -111,7 +120,9 @@ class ModesToBlackboard(ManagerBehaviour):
 
     def update(self) -> Status:
         """Copy what changed; SUCCESS (there is nothing to wait for)."""
-        manager = self.manager  # NotSetUp when ticked without setup (parts are only known then)
+        manager = self.manager  # NotSetUp when there is still no manager
+        if self.parts is None:  # set up before its manager was attached: every part of its model
+            self._register(manager.model.parts)
         changed = 0
         for part in self.parts or ():
             status = part_status(manager, part)

@@ -6,8 +6,12 @@ stays until somebody acts."""
 
 from __future__ import annotations
 
+import copy
 import operator
+import pickle
+import time
 from collections.abc import Iterator
+from dataclasses import replace
 
 import py_trees
 import pytest
@@ -229,12 +233,14 @@ def test_the_blackboard_follows_changes(rig: SimulatedSystem) -> None:
     assert laser == PartStatus("laser_resender", "unconfigured", None, "active", "__DEFAULT__", "grace")
     assert Blackboard.get("/system_modes/pilot").divergence == "grace"
     assert writer.feedback_message == "2 part(s) changed"
-    # str() is read when a watcher shows it: the divergence's age at that moment
-    assert str(laser) == "unconfigured (target active.__DEFAULT__: grace for 0.2 s)"
-    rig.clock.advance(0.9)
-    assert str(laser) == "unconfigured (target active.__DEFAULT__: grace for 1.1 s)"
+    # plain data (py_trees_ros pickles it to tell watchers of changes); str() says since when
+    assert pickle.loads(pickle.dumps(laser)) == laser and copy.deepcopy(laser) == laser
+    assert laser.since is not None and 0.0 < laser.since < 0.2
+    assert str(laser) == f"unconfigured (target active.__DEFAULT__: grace since t={laser.since:.1f} s)"
+    assert str(replace(laser, since=1_700_000_000.0)).endswith(
+        f"grace since {time.strftime('%H:%M:%S', time.localtime(1_700_000_000.0))})")  # a wall clock's
 
-    rig.clock.advance(GRACE - 0.9)
+    rig.clock.advance(GRACE)
     tree.tick()
     assert Blackboard.get("/system_modes/laser_resender").divergence == "fault"
 

@@ -13,7 +13,7 @@ from model_files import bundled
 from py_trees.common import Status
 from tree_helpers import fresh_blackboard
 
-from sm_bt.behaviours import ChangeMode, ModeIs, NotSetUp, OnDivergence, attach_manager, hold_mode
+from sm_bt.behaviours import ChangeMode, ModeIs, ModesToBlackboard, NotSetUp, OnDivergence, attach_manager, hold_mode
 from sm_bt.model.states import State
 from sm_bt.sim import SimulatedSystem
 
@@ -47,12 +47,17 @@ def test_a_manager_attached_after_setup_serves_the_whole_tree(rig: SimulatedSyst
     """py_trees_ros' order: the tree is set up first (that makes its node), the runtime on that node
     comes next, and only then its manager can be attached; the first tick finds and checks it."""
     root = py_trees.composites.Sequence("Mission", memory=True, children=[
-        ChangeMode("Normal", "pilot", "f_normal_mode"), ModeIs("Normal?", "pilot", "f_normal_mode")])
+        ModesToBlackboard(), ChangeMode("Normal", "pilot", "f_normal_mode"),
+        ModeIs("Normal?", "pilot", "f_normal_mode")])
     tree = _NoKwargsTree(root)
     tree.setup()
     attach_manager(root, rig.manager)
     rig.tick_until(tree, lambda: root.status is Status.SUCCESS)
     assert str(rig.manager.actual("pilot")) == "active.f_normal_mode"
+    tree.tick()  # the blackboard holds every part of the model, although setup could not name them
+    assert str(py_trees.blackboard.Blackboard.get("/system_modes/pilot")) == \
+        "active.f_normal_mode (target active.f_normal_mode)"
+    assert len(root.children[0].blackboard.write) == len(rig.manager.model.parts)
 
 
 def test_a_typo_in_a_tree_set_up_before_its_manager_fails_at_the_first_tick(rig: SimulatedSystem) -> None:
