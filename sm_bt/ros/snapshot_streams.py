@@ -5,8 +5,9 @@
 ``~/snapshot_streams/open``, ``close`` and ``reconfigure``
 (``py_trees_ros_interfaces/srv/{Open,Close,Reconfigure}SnapshotStream``). Each open stream is a
 latched ``py_trees_ros_interfaces/msg/BehaviourTree`` topic, published after a tick when the tree
-changed (a status, the visited path, or a feedback message: a new step of a mode change counts,
-see :class:`~sm_bt.behaviours.FeedbackSnapshotVisitor`) or its period elapsed, with blackboard
+changed (a status or the visited path: at once; a feedback message, such as a new step of a mode
+change, see :class:`~sm_bt.behaviours.FeedbackSnapshotVisitor`: at most every
+:data:`FEEDBACK_INTERVAL` s, the latest one) or its period elapsed, with blackboard
 data on the visited path and blackboard activity when the stream asked for them. sm_bt
 behaviours carry their part and mode in ``additional_detail``.
 
@@ -41,6 +42,9 @@ _BLACKBOX = {BlackBoxLevel.DETAIL: 1, BlackBoxLevel.COMPONENT: 2, BlackBoxLevel.
              BlackBoxLevel.NOT_A_BLACKBOX: 4}
 #: The tools' own margin: a periodic snapshot due within 2 % of its period is sent now.
 _CLOSE_ENOUGH = 0.98
+#: Seconds between snapshots sent for feedback alone: a feedback that counts time changes on every
+#: tick, and a snapshot per tick buried the Qt viewer (seconds behind on two cores).
+FEEDBACK_INTERVAL = 0.5
 
 
 @dataclass
@@ -51,6 +55,7 @@ class _Stream:
     blackboard_data: bool = False
     blackboard_activity: bool = False
     last: float | None = None  # when the last snapshot went out (monotonic)
+    held: bool = False  # feedback changed since then, not sent yet
 
 
 @dataclass
@@ -101,7 +106,7 @@ class SnapshotStreams:
                 stream = _Stream(topic, removable.publisher(self._node, BehaviourTree, topic, latched))
                 self._streams[topic] = stream
                 self._configure(stream, request.parameters)
-                self._publish(stream, changed=True)  # the tree as it is now, at once
+                self._publish(stream, status_changed=True)  # the tree as it is now, at once
             log.info("snapshot stream opened: %s", topic)
             response.topic_name = topic
         except Exception:  # an rclpy callback that raises stops the executor: answer empty instead
@@ -173,23 +178,29 @@ class SnapshotStreams:
         stats = self._statistics
         stats.count += 1
         stats.durations = ([*stats.durations, time.monotonic() - stats.started])[-10:]
+        status_changed = self._visitor.status_changed
+        feedback_changed = self._visitor.changed and not status_changed
         with self._lock:
             for stream in list(self._streams.values()):
                 try:
-                    self._publish(stream, changed=self._visitor.changed)
+                    self._publish(stream, status_changed=status_changed, feedback_changed=feedback_changed)
                 except Exception:  # a publisher destroyed under us (shutdown): not the tree's problem
                     log.debug("snapshot on %s not sent", stream.topic, exc_info=True)
             activity = py_trees.blackboard.Blackboard.activity_stream
             if self._activity_enabled_here and activity is not None:
                 activity.clear()
 
-    def _publish(self, stream: _Stream, *, changed: bool) -> None:
+    def _publish(self, stream: _Stream, *, status_changed: bool, feedback_changed: bool = False) -> None:
         now = time.monotonic()
-        due = stream.last is None or now - stream.last >= _CLOSE_ENOUGH * stream.period
-        if not changed and not due:
+        since = math.inf if stream.last is None else now - stream.last
+        held = stream.held or feedback_changed
+        changed = status_changed or since == math.inf or (held and since >= FEEDBACK_INTERVAL)
+        if not changed and since < _CLOSE_ENOUGH * stream.period:
+            stream.held = held  # sent with the next snapshot that goes out
             return
-        stream.publisher.publish(self._message(stream, changed or stream.last is None))
+        stream.publisher.publish(self._message(stream, changed or held))
         stream.last = now
+        stream.held = False
 
     def _message(self, stream: _Stream, changed: bool) -> Any:
         from diagnostic_msgs.msg import KeyValue as DiagnosticKeyValue

@@ -281,6 +281,7 @@ def test_each_new_step_of_a_mode_change_flags_a_snapshot_as_changed() -> None:
     while change.status is not Status.SUCCESS:
         tree.tick()
         flagged.append((visitor.changed, plain.changed, change.feedback_message))
+        assert visitor.status_changed == plain.changed  # what py_trees flags, apart
         rig.clock.advance(0.05)
     running = [f for f in flagged if f[2] and "s)" not in f[2]]  # the RUNNING ticks
     steps = {message for _, _, message in running}

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import py_trees
 import pytest
 from py_trees_ros_interfaces.msg import Behaviour, BehaviourTree
 from py_trees_ros_interfaces.srv import CloseSnapshotStream, OpenSnapshotStream, ReconfigureSnapshotStream
@@ -95,9 +96,9 @@ def test_a_plain_client_watches_the_mission_change_mode(client: RosContext, miss
 
     node.create_subscription(BehaviourTree, topic, received, LATCHED)
     wait_until(lambda: bool(snapshots), 10.0, "the current snapshot, at once")
-    # Now the mission can change mode, watched from the start; each transition takes 0.3 s, so a
-    # tick sees each step of the change.
-    node_processes("pilot", "--transition-delay", "0.3")
+    # Now the mission can change mode, watched from the start; each transition takes 1.2 s, longer
+    # than the pace of snapshots sent for feedback alone, so the stream shows each step.
+    node_processes("pilot", "--transition-delay", "1.2")
 
     def change_mode() -> list[Behaviour]:
         with lock:
@@ -141,3 +142,56 @@ def test_a_plain_client_watches_the_mission_change_mode(client: RosContext, miss
     assert call(closer, CloseSnapshotStream.Request(topic_name=topic), timeout=2.0).result
     assert not call(closer, CloseSnapshotStream.Request(topic_name=topic), timeout=2.0).result
     assert mission.poll() is None
+
+
+class _Counting(py_trees.behaviour.Behaviour):
+    """RUNNING with a feedback that changes on every tick (as one counting time does) until told
+    to succeed."""
+
+    def __init__(self) -> None:
+        super().__init__("Counting")
+        self.ticks = 0
+        self.done = False
+
+    def update(self) -> py_trees.common.Status:
+        self.ticks += 1
+        self.feedback_message = f"tick {self.ticks}"
+        return py_trees.common.Status.SUCCESS if self.done else py_trees.common.Status.RUNNING
+
+
+def test_feedback_alone_is_paced_and_a_status_change_goes_out_at_once(client: RosContext) -> None:
+    from sm_bt.ros.snapshot_streams import FEEDBACK_INTERVAL, SnapshotStreams
+
+    server = RosContext("paced_tree")
+    counting = _Counting()
+    tree = py_trees.trees.BehaviourTree(counting)
+    streams = SnapshotStreams(server.node, tree)
+    try:
+        request = OpenSnapshotStream.Request()
+        request.parameters.snapshot_period = math.inf
+        topic = client.call(OpenSnapshotStream, "/paced_tree/snapshot_streams/open", request).topic_name
+        snapshots: list[tuple[float, BehaviourTree]] = []
+        client.node.create_subscription(BehaviourTree, topic, lambda m: snapshots.append((time.monotonic(), m)),
+                                        LATCHED)
+        wait_until(lambda: bool(snapshots), 10.0, "the current snapshot, at once")
+        began, ticks = time.monotonic(), 0
+        while time.monotonic() - began < 4 * FEEDBACK_INTERVAL:  # 50 Hz, a new feedback on every tick
+            tree.tick()
+            ticks += 1
+            time.sleep(0.02)
+        time.sleep(0.3)
+        paced = [m for _, m in snapshots[1:]]
+        assert ticks > 50 and 2 <= len(paced) <= 6, (ticks, len(paced))  # not one per tick
+        assert all(m.changed for m in paced)
+        shown = [b.message for b in paced[-1].behaviours if b.name == "Counting"]
+        assert shown and shown[0] != "tick 1"  # the latest feedback, not the first held back
+        counting.done = True
+        tree.tick()  # RUNNING -> SUCCESS: sent although the last one went out just now
+        finished = time.monotonic()
+        wait_until(lambda: any(b.status == Behaviour.SUCCESS for _, m in snapshots for b in m.behaviours), 2.0,
+                   "the status change")
+        arrived = next(at for at, m in snapshots if any(b.status == Behaviour.SUCCESS for b in m.behaviours))
+        assert arrived - finished < FEEDBACK_INTERVAL
+    finally:
+        streams.close()
+        server.close()
