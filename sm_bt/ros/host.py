@@ -24,6 +24,7 @@ from sm_bt.behaviours.manager_access import attach_manager
 from sm_bt.engine.events import Event, EventKind
 from sm_bt.model.errors import Error
 from sm_bt.model.types import Model, SystemPart
+from sm_bt.ros.blackboard_streams import BlackboardStreams
 from sm_bt.ros.snapshot_streams import SnapshotStreams
 
 log = logging.getLogger("sm_bt.ros.host")
@@ -66,6 +67,7 @@ class MissionHost:
         self.tree = py_trees.trees.BehaviourTree(attach_manager(root, self.manager))
         self.tree.setup(**(setup or {}))
         self.streams = SnapshotStreams(node, self.tree)
+        self.blackboard_streams = BlackboardStreams(node, self.tree)
         self._shown: dict[str, str] = {}
         self._subscription = self.manager.subscribe(self._on_event, kinds=(EventKind.ACTUAL,))
         self._stop = threading.Event()
@@ -121,6 +123,7 @@ class MissionHost:
         try:
             self._subscription.cancel()
             self.streams.close()
+            self.blackboard_streams.close()
             self.tree.shutdown()
             self.tree.interrupt()
         finally:  # ROS is released whatever a behaviour's shutdown did

@@ -31,7 +31,7 @@ import py_trees
 from py_trees.common import BlackBoxLevel, Status
 
 from sm_bt.behaviours.visitors import FeedbackSnapshotVisitor
-from sm_bt.ros import removable
+from sm_bt.ros import blackboard_activity, removable
 from sm_bt.tree_snapshot import BehaviourView, behaviours, blackboard_values
 
 log = logging.getLogger("sm_bt.ros.snapshot_streams")
@@ -77,7 +77,6 @@ class SnapshotStreams:
         self._lock = threading.Lock()
         self._streams: dict[str, _Stream] = {}
         self._counter = 0
-        self._activity_enabled_here = False
         self._statistics = _Statistics()
         self._visitor = FeedbackSnapshotVisitor()
         tree.add_visitor(self._visitor)
@@ -155,19 +154,12 @@ class SnapshotStreams:
         self._update_activity()
 
     def _update_activity(self) -> None:
-        """Keep py_trees' activity stream on while a stream wants it (and only if we turned it on)."""
-        wanted = any(stream.blackboard_activity for stream in self._streams.values())
-        Blackboard = py_trees.blackboard.Blackboard
-        if wanted and Blackboard.activity_stream is None:
-            Blackboard.enable_activity_stream()
-            self._activity_enabled_here = True
-        elif not wanted and self._activity_enabled_here:
-            Blackboard.disable_activity_stream()
-            self._activity_enabled_here = False
+        blackboard_activity.want(self, any(stream.blackboard_activity for stream in self._streams.values()))
 
     # -- ticks (the ticking thread) ------------------------------------------------------------------
 
     def _before_tick(self, tree: py_trees.trees.BehaviourTree) -> None:
+        blackboard_activity.clear_for_tick()
         now = time.monotonic()
         stats = self._statistics
         if stats.started:
@@ -186,9 +178,6 @@ class SnapshotStreams:
                     self._publish(stream, status_changed=status_changed, feedback_changed=feedback_changed)
                 except Exception:  # a publisher destroyed under us (shutdown): not the tree's problem
                     log.debug("snapshot on %s not sent", stream.topic, exc_info=True)
-            activity = py_trees.blackboard.Blackboard.activity_stream
-            if self._activity_enabled_here and activity is not None:
-                activity.clear()
 
     def _publish(self, stream: _Stream, *, status_changed: bool, feedback_changed: bool = False) -> None:
         now = time.monotonic()

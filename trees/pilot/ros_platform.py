@@ -22,6 +22,7 @@ import py_trees
 
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model, ParamValue
+from sm_bt.ros.blackboard_streams import BlackboardStreams
 from sm_bt.ros.environment import prepare, require_ros
 from sm_bt.ros.node_process import NodesError, NodesProcess
 from sm_bt.ros.runtime import MANAGER_NODE_NAME, RosRuntime
@@ -75,7 +76,7 @@ class RosPlatform:
         self.tick = tick
         self._say = say or (lambda text: None)
         self._closed = False
-        self._streams: SnapshotStreams | None = None
+        self._streams: tuple[SnapshotStreams, BlackboardStreams] | None = None
         with ExitStack() as stack:
             stack.enter_context(_sigterm_as_interrupt())
             # The child inherits the environment: local discovery, and a domain id of this run's own
@@ -149,12 +150,12 @@ class RosPlatform:
         self.world.laser_ok = True
 
     def serve(self, tree: py_trees.trees.BehaviourTree) -> None:
-        """Serve ``tree``'s snapshot streams on the manager's node (py-trees-tree-watcher)."""
-        from sm_bt.ros.snapshot_streams import SnapshotStreams
-
-        self._streams = SnapshotStreams(self.runtime.node, tree)
-        self._say(f"tree snapshot streams on {self.runtime.node.get_fully_qualified_name()}/snapshot_streams "
-                  "(py-trees-tree-watcher)")
+        """Serve ``tree``'s snapshot and blackboard streams on the manager's node (py-trees-tree-watcher,
+        py-trees-blackboard-watcher)."""
+        self._streams = (SnapshotStreams(self.runtime.node, tree), BlackboardStreams(self.runtime.node, tree))
+        name = self.runtime.node.get_fully_qualified_name()
+        self._say(f"tree snapshot and blackboard streams on {name}/snapshot_streams and {name}/blackboard_streams "
+                  "(py-trees-tree-watcher, py-trees-blackboard-watcher)")
 
     def close(self) -> None:
         """Close the runtime, then stop the node process (SIGINT, then SIGKILL); idempotent."""
@@ -162,8 +163,8 @@ class RosPlatform:
             return
         self._closed = True
         try:
-            if self._streams is not None:
-                self._streams.close()
+            for streams in self._streams or ():
+                streams.close()
         finally:  # the runtime and the node process stop whatever happened above
             self._close_runtime_and_nodes()
 
