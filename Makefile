@@ -70,14 +70,20 @@ bench: $(STAMP)
 # example of the documentation against the reference. Exit status 1 if sm-bt manager does not do
 # what a scenario asks.
 # Without access to github.com, SM_BT_GIT_MIRRORS names a folder of git mirrors of the sources.
+# Then py_trees_ros 2.2.2 and devel, from their sources (tools/py_trees_ros.sh): the docs' recipe for
+# hosting a mission in py_trees_ros, and py-trees-blackboard-watcher on the trees sm_bt hosts.
 .PHONY: interop
-interop: $(STAMP)
+interop: $(VENV)/.interop
 	@mkdir -p $(ROS_LOG_DIR) build/interop
 	prefix="$$(bash tools/reference/build.sh)" && \
 	SM_BT_REFERENCE="$$prefix" PYTHONPATH=tests/support:tests/interop \
 		$(BIN)/python tests/interop/harness.py --out build/interop && \
 	SM_BT_REFERENCE="$$prefix" SM_BT_TESTS_NEED_ALL=1 PYTHONPATH=tests/support \
-		$(BIN)/python -m pytest -q -p no:cacheprovider tests/interop/interop_cli.py
+		$(BIN)/python -m pytest -q -p no:cacheprovider tests/interop/interop_cli.py tests/interop/interop_py_trees_ros.py
+
+$(VENV)/.interop: $(STAMP) pyproject.toml constraints.txt
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[interop]'
+	touch $@
 
 # mypy and griffe (the API reference's reader) cannot follow the editable install's mapping of
 # behaviours/, trees/ and models/ onto sm_bt.*, so they read a symlinked view of the installed

@@ -33,6 +33,9 @@ sources=(
   "system_modes micro-ROS/system_modes b8679e9781914c6bdb533750bbe7183d7661f63a"
 )
 
+# shellcheck source=../git_sources.sh
+source "$here/../git_sources.sh"
+
 say() { echo "reference: $*" >&2; }
 die() {
   echo >&2
@@ -95,30 +98,11 @@ make_venv() {
   "$venv/bin/python" -m pip install --disable-pip-version-check -r "$pins"
 }
 
-source_url() {  # source_url <owner/name>
-  local repo="$1" dir="${SM_BT_GIT_MIRRORS:-}" candidate
-  if [[ -n "$dir" ]]; then
-    for candidate in "$dir/${repo/\//+}/repo" "$dir/$repo.git" "$dir/$repo"; do
-      if [[ -d "$candidate" ]]; then
-        echo "$candidate"
-        return
-      fi
-    done
-    die "SM_BT_GIT_MIRRORS=$dir has no mirror of $repo" "Expected $dir/${repo/\//+}/repo, $dir/$repo.git or $dir/$repo."
-  fi
-  echo "https://github.com/$repo.git"
-}
-
 get_sources() {
-  local entry name repo commit url
+  local entry name repo commit
   for entry in "${sources[@]}"; do
     read -r name repo commit <<<"$entry"
-    url="$(source_url "$repo")"
-    git init --quiet "$prefix/src/$name"
-    git -C "$prefix/src/$name" fetch --quiet --depth 1 "$url" "$commit" ||
-      git -C "$prefix/src/$name" fetch --quiet "$url" ||
-      die "cannot fetch $repo from $url" "Without access to github.com, set SM_BT_GIT_MIRRORS to a folder of mirrors."
-    git -C "$prefix/src/$name" -c advice.detachedHead=false checkout --quiet "$commit"
+    fetch_commit "$repo" "$commit" "$prefix/src/$name"
   done
 }
 
