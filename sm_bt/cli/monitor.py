@@ -141,6 +141,10 @@ def _ros_runtime(model: Model, stack: ExitStack) -> Any:
         print(f"{PROG}: error: {error}", file=sys.stderr)
         return None
     stack.callback(runtime.close)
+    from sm_bt.ros.remote_targets import RemoteTargets
+
+    # Next to a running manager, its targets (it announces them on its request topics).
+    stack.callback(RemoteTargets(runtime.node, runtime.manager, model).close)
     return runtime
 
 
@@ -165,6 +169,13 @@ def _watch(args: argparse.Namespace, model: Model, watch: _Watch, monitor: Monit
         if args.ros:
             started = time.monotonic()
             missing = watch.discover([node.name for node in model.nodes], deadline)
+            if missing and len(missing) == len(model.nodes):
+                from sm_bt.ros.environment import describe_discovery
+
+                print(f"{PROG}: error: nothing answered: none of the model's {len(missing)} nodes was reachable "
+                      f"within {time.monotonic() - started:.1f} s ({describe_discovery()}); start them, or check "
+                      "the domain and discovery settings", file=sys.stderr)
+                return 1
             if missing:
                 print(f"{PROG}: warning: not reachable after {DISCOVERY:g} s: {', '.join(missing)}",
                       file=sys.stderr)

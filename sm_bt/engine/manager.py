@@ -150,6 +150,15 @@ class ModeManager:
             self._check_part(part)
             return self._inference.target(part)
 
+    def observe_target(self, part: str, target: StateMode | None) -> None:
+        """Take ``target`` as ``part``'s target without asking anything of its nodes: another
+        manager, heard on its request topics, works on it. For a manager that only watches (rules
+        and recovery off: ``sm-bt monitor --ros`` next to ``sm-bt manager``), so that it shows
+        targets and divergences as that manager has them."""
+        with self._serial:
+            self._check_part(part)
+            self._ledger.set_target(part, target)
+
     def divergences(self, *, errors_only: bool = False) -> list[Divergence]:
         """Parts whose actual differs from their target, bottom-up. ``errors_only`` keeps those
         beyond the grace period that no request explains."""

@@ -47,3 +47,18 @@ def test_a_part_given_up_on_says_so() -> None:
     pilot.run_until(lambda: pilot.manager.status("laser_resender").gave_up, timeout=120.0)
     status = pilot.manager.status("laser_resender")
     assert status.gave_up and status.divergence is not None and status.divergence.cause is Cause.FAULT
+
+
+def test_an_observed_target_is_shown_and_diverged_from_but_asks_nothing_of_the_nodes() -> None:
+    """What a watching manager does with another manager's targets (sm-bt monitor --ros)."""
+    watcher = SimulatedSystem("pilot", grace_period=0.5, rules=False, recovery=False)
+    calls = len(watcher.backend.events)
+    watcher.manager.observe_target("amcl", StateMode(State.ACTIVE, "__DEFAULT__"))
+    watcher.run(1.0)
+    assert watcher.manager.requests() == []
+    assert [e for e in watcher.backend.events[calls:] if e.kind.value == "request"] == []  # no call went out
+    status = watcher.manager.status("amcl")
+    assert status.target == StateMode(State.ACTIVE, "__DEFAULT__") and status.actual.state is State.UNCONFIGURED
+    assert status.divergence is not None and status.divergence.cause is Cause.FAULT  # as the other manager sees it
+    watcher.manager.observe_target("amcl", StateMode(State.UNCONFIGURED))
+    assert watcher.manager.status("amcl").divergence is None

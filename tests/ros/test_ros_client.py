@@ -198,9 +198,17 @@ def test_monitor_next_to_a_running_manager_watches_and_refuses_to_act(
     assert sm_bt(capsys, "state", "set", "pilot", "configure", "--wait")[0] == 0
     code, out, err = sm_bt(capsys, "monitor", "pilot", "--ros", "--once", "--duration", "5")
     assert code == 0, err
-    # The watcher set no target (it only observes): the row is the part and its actual state.
-    (row,) = [line.split() for line in out.splitlines() if line.split()[:1] == ["amcl"]]
-    assert row == ["amcl", "inactive"], out
+    # The targets are the manager's (its request topics): the table is what that manager has.
+    rows = {line.split()[0]: line.split() for line in out.splitlines() if line.split()[:1] in (["amcl"], ["pilot"])}
+    assert rows["amcl"] == ["amcl", "inactive", "inactive"], out
+    assert rows["pilot"] == ["pilot", "inactive", "inactive(*)"], out
+
+
+def test_monitor_with_no_node_answering_says_so_and_fails(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = sm_bt(capsys, "monitor", "pilot", "--ros", "--once", "--duration", "2")
+    assert code == 1 and out == ""
+    assert err.startswith("sm-bt: error: nothing answered: none of the model's 4 nodes was reachable within 2."), err
+    assert "ROS_DOMAIN_ID=" in err
 
 
 def test_a_transition_is_sent_with_its_id_and_its_label(
