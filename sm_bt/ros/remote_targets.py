@@ -11,6 +11,7 @@ the target columns and divergences next to a running manager. Each topic is read
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 from sm_bt.engine.manager import ModeManager
@@ -35,15 +36,13 @@ class RemoteTargets:
             for part in model.parts:
                 self._subscriptions += [
                     removable.subscription(node, TransitionEvent, f"/{part}/transition_request_info",
-                                           lambda message, part=part: self._state(part, message.goal_state.label),
-                                           qos),
+                                           functools.partial(self._state, part), qos),
                     removable.subscription(node, ModeEvent, f"/{part}/mode_request_info",
-                                           lambda message, part=part: self._mode(part, message.goal_mode.label),
-                                           qos)]
+                                           functools.partial(self._mode, part), qos)]
 
-    def _state(self, part: str, label: str) -> None:
+    def _state(self, part: str, message: Any) -> None:
         try:
-            state = State.from_label(label)
+            state = State.from_label(message.goal_state.label)
         except ValueError:
             return  # not a state: nothing to show
         if state not in (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE, State.FINALIZED):
@@ -52,7 +51,8 @@ class RemoteTargets:
         mode = known.mode if known is not None and state is State.ACTIVE else None
         self._manager.observe_target(part, StateMode(state, mode))  # the mode request, if any, follows
 
-    def _mode(self, part: str, mode: str) -> None:
+    def _mode(self, part: str, message: Any) -> None:
+        mode = message.goal_mode.label
         if mode in self._manager.model.parts[part].modes:  # else not one of this model's: not shown
             self._manager.observe_target(part, StateMode(State.ACTIVE, mode))
 
