@@ -65,7 +65,11 @@ class MissionHost:
             self._thread = threading.Thread(target=self._spin, name="sm_bt-mission-spin", daemon=True)
             self._thread.start()
         self.tree = py_trees.trees.BehaviourTree(attach_manager(root, self.manager))
-        self.tree.setup(**(setup or {}))
+        try:
+            self.tree.setup(**(setup or {}))
+        except Exception as error:  # a behaviour's own setup (user code): its message, not a traceback
+            self._release()
+            raise HostError(f"the tree cannot be set up: {error}") from error
         self.streams = SnapshotStreams(node, self.tree)
         self.blackboard_streams = BlackboardStreams(node, self.tree)
         self._shown: dict[str, str] = {}
@@ -127,11 +131,14 @@ class MissionHost:
             self.tree.shutdown()
             self.tree.interrupt()
         finally:  # ROS is released whatever a behaviour's shutdown did
-            self.runtime.close()
-            if self._executor is not None:
-                self._executor.shutdown(timeout_sec=2.0)
-            if self._thread is not None:
-                self._thread.join(3.0)
+            self._release()
+
+    def _release(self) -> None:
+        self.runtime.close()
+        if self._executor is not None:
+            self._executor.shutdown(timeout_sec=2.0)
+        if self._thread is not None:
+            self._thread.join(3.0)
 
 
 @contextlib.contextmanager

@@ -28,7 +28,8 @@ LASER_SCANS_OK = "/components/laser_scans"
 def _world(behaviour: py_trees.behaviour.Behaviour, kwargs: dict[str, Any]) -> World:
     world = kwargs.get("world")
     if not isinstance(world, World):
-        raise RuntimeError(f"{behaviour.qualified_name}: no world; set the tree up with "
+        raise RuntimeError(f"{behaviour.qualified_name}: no world: the pilot's actions drive a simulated robot, "
+                           "so its trees run in `sm-bt demo` (or `sm-bt demo --ros`), or set up with "
                            "tree.setup(manager=manager, world=World())")
     return world
 
