@@ -26,6 +26,9 @@ from sm_bt.cli.common import CliError, UsageError
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
 
 DEFAULT_TIMEOUT = 10.0
+#: Seconds a forced node transition must hold before --wait calls it final: longer than a mode
+#: manager's grace period (2 s by default) and its restore.
+SETTLE = 5.0
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
@@ -60,7 +63,11 @@ def add_state_arguments(parser: argparse.ArgumentParser) -> None:
     put.add_argument("part", metavar="PART")
     put.add_argument("transition", metavar="TRANSITION", help=f"one of {', '.join(REQUESTABLE_LABELS)}")
     put.add_argument("--wait", action="store_true", help="wait until the part is in the state the transition "
-                                                         "leads to; print how long it took")
+                                                         "leads to; print how long it took (with --force, and "
+                                                         "what holds once its manager had its say)")
+    put.add_argument("--force", action="store_true",
+                     help="send it to a node that a mode manager manages: the manager takes a change it did "
+                          "not ask for as a fault and puts the node back after its grace period")
     for child in (get, put):
         _common(child)
 
@@ -126,14 +133,25 @@ def run_state(args: argparse.Namespace) -> int:
         return 0
 
     def put(client: Any) -> int:
+        managed = client.managed_node(part)
+        if managed and not args.force:
+            raise CliError(f"{part} is a node that a mode manager manages: it would take a transition it did not ask "
+                           "for as a fault and undo it after its grace period. Ask the manager instead (a system's "
+                           f"state or mode, or `sm-bt mode set {part} MODE`), or add --force to send it anyway")
         asked = time.monotonic()
         if not client.change_state(part, args.transition):
             raise CliError(f"{part} refused the transition {args.transition!r} (from {client.get_state(part)})")
         if not args.wait:
-            print(f"{part}: {args.transition} accepted")
+            print(f"{part}: {args.transition} accepted" + (" (its mode manager may undo it)" if managed else ""))
             return 0
         seconds = client.wait_for_state(part, args.transition, asked)
-        print(f"{part}: {client.get_state(part)} {seconds:.2f} s after the request")
+        reached = client.get_state(part)
+        print(f"{part}: {reached} {seconds:.2f} s after the request")
+        if managed:
+            final = client.state_after(part, SETTLE)
+            if final != reached:
+                raise CliError(f"{part}: then {final} again: its mode manager put it back")
+            print(f"{part}: still {final} {SETTLE:g} s later")
         return 0
 
     return _translated(args, {"get": get, "set": put}[args.action])

@@ -145,6 +145,32 @@ class ModeClient:
         return ("is a mode manager (`sm-bt manager MODEL`) running, with the same ROS_DOMAIN_ID and "
                 "ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?")
 
+    def managed_node(self, part: str) -> bool:
+        """Is ``part`` a node that a mode manager manages (it answers ``get_mode`` for it, and serves
+        no lifecycle service of its own for it, as it does for a system)?"""
+        return not self._is_system(part) and self._manager_answers(part)
+
+    def state_after(self, part: str, seconds: float) -> str:
+        """The node's state once ``seconds`` passed with no change, or more (each change starts
+        the wait again; at most ``timeout`` s in all): what holds once its manager had its say."""
+        from lifecycle_msgs.msg import TransitionEvent
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        changed: list[float] = []
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+        subscription = self.node.create_subscription(TransitionEvent, f"/{part}/transition_event",
+                                                     lambda event: changed.append(time.monotonic()), qos)
+        try:
+            began = time.monotonic()
+            while True:
+                now = time.monotonic()
+                quiet_since = max([began, *changed])
+                if now - quiet_since >= seconds or now - began >= max(self.timeout, seconds):
+                    return self.get_state(part)
+                self.executor.spin_once(timeout_sec=0.05)
+        finally:
+            self.node.destroy_subscription(subscription)
+
     def _is_system(self, part: str) -> bool:
         """Does a manager serve ``part`` as a system (``get_available_states`` is a system's only)?"""
         return any(name == f"/{part}/get_available_states" for name, _ in self.node.get_service_names_and_types())

@@ -63,6 +63,15 @@ def test_mode_and_state_commands_drive_the_pilot_and_confirm_each_change(
         assert time.monotonic() < deadline, "f_degraded_mode never reached"
     assert manager.lines("change_mode pilot f_degraded_mode", "succeeded")
 
+    # A node the manager manages: a direct transition is refused, unless forced; then --wait says
+    # what holds once the manager had its say (it put the node back: its target is active).
+    code, out, err = sm_bt(capsys, "state", "set", "amcl", "deactivate", "--wait")
+    assert (code, out) == (1, "") and err.startswith("sm-bt: error: amcl is a node that a mode manager manages: "), err
+    assert sm_bt(capsys, "state", "get", "amcl")[1] == "amcl: active\n"  # nothing was sent
+    code, out, err = sm_bt(capsys, "state", "set", "amcl", "deactivate", "--wait", "--force")
+    assert re.fullmatch(r"amcl: inactive \d+\.\d\d s after the request\n", out), out
+    assert (code, err) == (1, "sm-bt: error: amcl: then active again: its mode manager put it back\n"), err
+
 
 def test_names_that_are_not_served_are_usage_errors_with_the_closest_name(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter,
