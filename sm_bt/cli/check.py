@@ -4,12 +4,17 @@ Every file is checked, whatever happened to the ones before: a model that fails 
 with errors, even a bug in sm-bt on one file (reported as an internal error for that file;
 ``--debug`` adds the traceback). A directory stands for the model and tree files below it. Exit
 status 1 if any file failed.
+
+A tree is checked against the model it names in a comment, ``<!-- sm_bt model: pilot -->`` (a
+bundled model's name, or a path relative to the tree file), else against ``--model``, else
+against every model given with it; each error says which model it is against.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import traceback
 from collections.abc import Callable, Sequence
@@ -26,6 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="model file, a directory (every .yaml/.yml model and .xml tree below it), or the name "
                              "of a bundled model (" + ", ".join(bundled_names()) + "); a mission tree file (.xml) "
                              "is checked against the models given with it")
+    parser.add_argument("--model", metavar="MODEL",
+                        help="check the tree files against this model (a file or a bundled name), unless a tree "
+                             "names its own (<!-- sm_bt model: NAME -->)")
     add_lenient(parser)
     parser.add_argument("--reference", action="store_true",
                         help="also say which constructs of each model the reference manager (micro-ROS/system_modes) "
@@ -36,6 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 MODEL_SUFFIXES = (".yaml", ".yml")
+#: How a tree file names its model (a comment, so that BehaviorTree.CPP and Groot2 read the file as ever).
+DECLARED_MODEL = re.compile(r"<!--\s*sm_bt model:\s*(\S+)\s*-->")
 
 
 def _expand(names: Sequence[str]) -> list[str]:
@@ -70,8 +80,10 @@ def run(args: argparse.Namespace) -> int:
         print_issues(model.warnings, sys.stdout)
         if args.reference:
             failed += not _guarded(name, args.debug, partial(_check_reference, model))
+    paired: dict[str, Model] = {}  # models named by trees or --model, loaded once each
     for tree in trees:
-        failed += not _guarded(tree, args.debug, partial(_check_tree_file, tree, models))
+        against = _models_of(tree, args, models, paired)
+        failed += against is None or not _guarded(tree, args.debug, partial(_check_tree_file, tree, against))
     if len(names) > 1 and (failed or len(names) > len(args.models)):  # a tally where one helps
         print(f"{plural(len(names), 'file')} checked, {failed} failed", file=sys.stderr if failed else sys.stdout)
     return 1 if failed else 0
@@ -92,8 +104,32 @@ def _check_reference(model: Model) -> bool:
     return not errors
 
 
+def _models_of(tree: str, args: argparse.Namespace, given: list[tuple[str, Model]],
+               paired: dict[str, Model]) -> list[tuple[str, Model]] | None:
+    """The models ``tree`` is checked against: the one it names, else ``--model``, else every one
+    given; ``None`` (said why) when the one it names or ``--model`` does not load."""
+    try:
+        text = Path(tree).read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        text = ""  # check_tree says what is wrong with the file
+    named = DECLARED_MODEL.search(text)
+    if named:
+        name = named[1] if named[1] in bundled_names() else str(Path(tree).parent / named[1])
+    elif args.model:
+        name = args.model
+    else:
+        return given
+    if name not in paired:
+        model = load_or_report(name, strict=not args.lenient)
+        if model is None:
+            print(f"{tree}: failed (its model {name} does not load)", file=sys.stderr)
+            return None
+        paired[name] = model
+    return [(name, paired[name])]
+
+
 def _check_tree_file(tree: str, models: list[tuple[str, Model]]) -> bool:
-    """Check ``tree`` against every model (or alone, without one); print what was found."""
+    """Check ``tree`` against each of ``models`` (or alone, without one); print what was found."""
     import sm_bt.trees.pilot  # noqa: F401 (registers the pilot's actions, which shipped trees use)
     from sm_bt.trees.mission_xml import check_tree
 
@@ -102,9 +138,12 @@ def _check_tree_file(tree: str, models: list[tuple[str, Model]]) -> bool:
     for name, model in against:
         issues = check_tree(tree, model)
         for issue in issues:
-            print(issue, file=sys.stderr)
+            print(f"{issue} [against {name}]" if len(against) > 1 else issue, file=sys.stderr)
         ok = ok and not issues
-        if not issues:
+        if issues:
+            print(f"{tree}: failed ({plural(len(issues), 'error')}" + (f" against {name})" if name else ")"),
+                  file=sys.stderr)
+        else:
             print(f"{tree}: ok" + (f" against {name}" if name else " (no model given: parts and modes not checked)"))
     return ok
 

@@ -140,8 +140,34 @@ def test_check_a_tree_file_against_the_model_given_with_it(capsys: pytest.Captur
     assert err.splitlines() == [f"{bad}:4: error: <ModeIs 'ModeIs'>: unknown part 'pilto' (did you mean 'pilot'?) "
                                 "(parts: pilot, amcl, controller_server, pointcloud_to_laser, laser_resender)",
                                 f"{bad}:5: error: unknown node <Bogus> (import the module that defines it, or pass "
-                                "it in registry=)", "3 files checked, 1 failed"]
+                                "it in registry=)", f"{bad}: failed (2 errors against pilot)", "3 files checked, 1 failed"]
     assert out.splitlines()[-1] == f"{pilot.XML}: ok against pilot"  # the other files are still checked
+
+
+def test_the_projects_own_models_and_trees_check_clean(capsys: pytest.CaptureFixture[str]) -> None:
+    """The shipped tree names its model (<!-- sm_bt model: pilot -->): not checked against the others."""
+    root = Path(__file__).resolve().parents[2]
+    code, out, err = run(capsys, "check", root / "models", root / "trees")
+    assert (code, err) == (0, ""), err
+    assert out.splitlines()[-2:] == [f"{root / 'trees' / 'pilot' / 'pilot.xml'}: ok against pilot",
+                                     "4 files checked, 0 failed"]
+
+
+def test_a_tree_is_checked_against_the_model_it_names_or_model_or_each_given_saying_which(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    tree = '<root>\n  <BehaviorTree ID="M">\n    <ModeIs part="pilot" mode="f_normal_mode"/>\n  </BehaviorTree>\n</root>\n'
+    (tmp_path / "plain.xml").write_text(tree)
+    code, _, err = run(capsys, "check", "pilot", "actuation", tmp_path / "plain.xml")
+    assert code == 1 and err.splitlines()[0].startswith(f"{tmp_path / 'plain.xml'}:3: error: ") \
+        and err.splitlines()[0].endswith(" [against actuation]"), err
+    assert f"{tmp_path / 'plain.xml'}: failed (1 error against actuation)" in err.splitlines()
+    assert run(capsys, "check", "actuation", tmp_path / "plain.xml", "--model", "pilot")[0] == 0
+    (tmp_path / "named.xml").write_text("<!-- sm_bt model: pilot -->\n" + tree)
+    code, out, err = run(capsys, "check", "actuation", tmp_path / "named.xml")
+    assert (code, err) == (0, "") and f"{tmp_path / 'named.xml'}: ok against pilot" in out
+    (tmp_path / "lost.xml").write_text("<!-- sm_bt model: robot.yaml -->\n" + tree)
+    code, out, err = run(capsys, "check", tmp_path / "lost.xml")
+    assert code == 1 and f"{tmp_path / 'lost.xml'}: failed (its model {tmp_path / 'robot.yaml'} does not load)" in err
 
 
 # -- modes -------------------------------------------------------------------------------------
