@@ -140,7 +140,8 @@ def test_check_a_tree_file_against_the_model_given_with_it(capsys: pytest.Captur
     assert err.splitlines() == [f"{bad}:4: error: <ModeIs 'ModeIs'>: unknown part 'pilto' (did you mean 'pilot'?) "
                                 "(parts: pilot, amcl, controller_server, pointcloud_to_laser, laser_resender)",
                                 f"{bad}:5: error: unknown node <Bogus> (import the module that defines it, or pass "
-                                "it in registry=)", f"{bad}: failed (2 errors against pilot)", "3 files checked, 1 failed"]
+                                "it in registry=)", f"{bad}: failed (2 errors against pilot)",
+                                "3 files checked, 1 failed"]
     assert out.splitlines()[-1] == f"{pilot.XML}: ok against pilot"  # the other files are still checked
 
 
@@ -155,7 +156,8 @@ def test_the_projects_own_models_and_trees_check_clean(capsys: pytest.CaptureFix
 
 def test_a_tree_is_checked_against_the_model_it_names_or_model_or_each_given_saying_which(
         capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    tree = '<root>\n  <BehaviorTree ID="M">\n    <ModeIs part="pilot" mode="f_normal_mode"/>\n  </BehaviorTree>\n</root>\n'
+    tree = ('<root>\n  <BehaviorTree ID="M">\n    <ModeIs part="pilot" mode="f_normal_mode"/>\n'
+            '  </BehaviorTree>\n</root>\n')
     (tmp_path / "plain.xml").write_text(tree)
     code, _, err = run(capsys, "check", "pilot", "actuation", tmp_path / "plain.xml")
     assert code == 1 and err.splitlines()[0].startswith(f"{tmp_path / 'plain.xml'}:3: error: ") \
