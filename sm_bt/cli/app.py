@@ -20,6 +20,7 @@ import sys
 
 from sm_bt.cli import check, demo, manager, mission, modes, monitor, remote, sim_nodes, view
 from sm_bt.cli.common import PROG, CliError, Command, UsageError
+from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.types import DEFAULT_MODE
 
 #: Every subcommand, in the order ``--help`` lists them. Add new ones here.
@@ -95,14 +96,34 @@ def build_parser() -> argparse.ArgumentParser:
         child = sub.add_parser(command.name, help=command.help, description=command.description or command.help)
         command.add_arguments(child)
         child.set_defaults(run=command.run)
+        _mark(child)
     return parser
+
+
+def _mark(parser: argparse.ArgumentParser) -> None:
+    """Each (sub)command's parser names itself in its defaults, so that an argument it does not
+    know is reported by it (its usage, its options), not by the top-level parser."""
+    parser.set_defaults(parser=parser)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                _mark(child)
+
+
+def _unknown(parser: argparse.ArgumentParser, extras: list[str]) -> str:
+    """What to say of arguments ``parser`` does not take: the closest option of its own."""
+    options = [option for action in parser._actions for option in action.option_strings]
+    first = next((extra for extra in extras if extra.startswith("-")), extras[0])
+    return f"unrecognized arguments: {' '.join(extras)}" + did_you_mean(first.split("=")[0], options)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``sm-bt`` with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args, extras = parser.parse_known_args(argv)
+        if extras:
+            getattr(args, "parser", parser).error(_unknown(getattr(args, "parser", parser), extras))
     except SystemExit as stop:  # --help, --version and usage errors
         if stop.code is None or isinstance(stop.code, int):
             return stop.code or 0

@@ -31,25 +31,30 @@ DEFAULT_TIMEOUT = 10.0
 SETTLE = 5.0
 
 
-def _common(parser: argparse.ArgumentParser) -> None:
+PART_HELP = "a system or node of the running manager's model (`sm-bt mode list` shows a part's modes)"
+
+
+def _common(parser: argparse.ArgumentParser, *, waits: bool = False) -> None:
     parser.add_argument("--timeout", type=non_negative, default=DEFAULT_TIMEOUT, metavar="SECONDS",
-                        help=f"give up after this long: to find the manager, for each answer, and with --wait "
-                             f"for the confirmation (default {DEFAULT_TIMEOUT:g})")
+                        help="give up after this long: to find the manager, for each answer"
+                             + (", and with --wait for the confirmation" if waits else "")
+                             + f" (default {DEFAULT_TIMEOUT:g})")
 
 
 def add_mode_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     get = actions.add_parser("get", help="print the part's current mode, as the manager infers it")
-    get.add_argument("part", metavar="PART")
+    get.add_argument("part", metavar="PART", help=PART_HELP)
     listed = actions.add_parser("list", help="print the modes the manager offers for the part")
-    listed.add_argument("part", metavar="PART")
+    listed.add_argument("part", metavar="PART", help=PART_HELP)
     put = actions.add_parser("set", help="ask the manager for a mode of the part")
-    put.add_argument("part", metavar="PART")
-    put.add_argument("mode", metavar="MODE")
+    put.add_argument("part", metavar="PART", help=PART_HELP)
+    put.add_argument("mode", metavar="MODE", help="one of the part's modes (`sm-bt mode list PART`), or __DEFAULT__")
     put.add_argument("--wait", action="store_true",
                      help="wait until the manager confirms the part is in MODE; print how long it took")
-    for child in (get, listed, put):
+    for child in (get, listed):
         _common(child)
+    _common(put, waits=True)
     parser.epilog = ("Needs a mode manager on ROS 2 (`sm-bt manager MODEL`, or the reference's) in this shell's "
                      "ROS_DOMAIN_ID.")
 
@@ -57,10 +62,10 @@ def add_mode_arguments(parser: argparse.ArgumentParser) -> None:
 def add_state_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     get = actions.add_parser("get", help="print the part's lifecycle state")
-    get.add_argument("part", metavar="PART")
+    get.add_argument("part", metavar="PART", help=PART_HELP)
     put = actions.add_parser("set", help="ask for a lifecycle transition of the part (a system's through the "
                                          "manager, a node's through its own service)")
-    put.add_argument("part", metavar="PART")
+    put.add_argument("part", metavar="PART", help=PART_HELP)
     put.add_argument("transition", metavar="TRANSITION", help=f"one of {', '.join(REQUESTABLE_LABELS)}")
     put.add_argument("--wait", action="store_true", help="wait until the part is in the state the transition "
                                                          "leads to; print how long it took (with --force, and "
@@ -68,8 +73,8 @@ def add_state_arguments(parser: argparse.ArgumentParser) -> None:
     put.add_argument("--force", action="store_true",
                      help="send it to a node that a mode manager manages: the manager takes a change it did "
                           "not ask for as a fault and puts the node back after its grace period")
-    for child in (get, put):
-        _common(child)
+    _common(get)
+    _common(put, waits=True)
 
 
 def _client(args: argparse.Namespace) -> AbstractContextManager[Any]:

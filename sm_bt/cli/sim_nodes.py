@@ -10,8 +10,7 @@ from __future__ import annotations
 import argparse
 
 from sm_bt.cli.arguments import non_negative
-from sm_bt.cli.common import CliError, UsageError, load
-from sm_bt.model.errors import ModelError
+from sm_bt.cli.common import CliError, UsageError, load_or_report
 
 
 def _names(text: str) -> list[str]:
@@ -42,13 +41,11 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     from sm_bt.ros.sim_nodes import RefusedName, run_nodes, select_nodes
 
-    # A model or names that cannot run are usage errors (exit 2), as a parent process reads them.
-    try:
-        model = load(args.model)
-    except ModelError as error:
-        raise UsageError(f"{args.model}: invalid model: {'; '.join(map(str, error.issues))}") from None
-    except CliError as error:
-        raise UsageError(str(error)) from None
+    # As every command: a model that does not load is exit 1 (each error on a line of its own),
+    # names that are not the model's nodes a usage error (exit 2).
+    model = load_or_report(args.model, strict=True)
+    if model is None:
+        return 1
     try:
         select_nodes(model, args.only, args.parameters_only)
     except ValueError as error:  # names that are not nodes of the model
@@ -57,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         run_nodes(model, args.only, initial_state=args.state, parameters_only=args.parameters_only,
                   transition_delay=args.transition_delay, single_threaded=args.single_threaded)
     except RefusedName as error:  # a part or parameter name ROS refuses
-        raise UsageError(f"{args.model}: {error}") from None
+        raise CliError(f"{args.model}: {error}") from None
     except KeyboardInterrupt:  # a signal before our handlers were installed
         return 130
     return 0

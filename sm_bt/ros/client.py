@@ -44,6 +44,8 @@ POLL = 0.5
 NODE_SERVICES = frozenset({"get_state", "change_state"})
 #: How long to look for the manager of a node that does not answer, to say which of the two is out of reach.
 PEEK = 2.0
+#: Seconds the graph may take to show the rest of a manager's services once one of them shows.
+GRAPH_SETTLE = 1.0
 
 
 class ManagerUnreachable(Error, RuntimeError):
@@ -142,13 +144,39 @@ class ModeClient:
             # Its manager answers but its lifecycle services do not: they are a node's own.
             return (f"{part} is a node, and its mode manager answers but the node does not: it is not running, or "
                     f"the network to it is down (`sm-bt mode get {part}` shows what the manager knows)")
-        return ("is a mode manager (`sm-bt manager MODEL`) running, with the same ROS_DOMAIN_ID and "
-                "ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?")
+        same = "with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?"
+        if service in NODE_SERVICES:  # a node's own service, or a system's through its manager
+            return (f"if {part} is a node, is it running (its own lifecycle service answers this)? If a system, is "
+                    f"its mode manager (`sm-bt manager MODEL`) running? Either {same}")
+        return f"is a mode manager (`sm-bt manager MODEL`) running, {same}"
 
     def managed_node(self, part: str) -> bool:
-        """Is ``part`` a node that a mode manager manages (it answers ``get_mode`` for it, and serves
-        no lifecycle service of its own for it, as it does for a system)?"""
-        return not self._is_system(part) and self._manager_answers(part)
+        """Is ``part`` a node (its own ``change_state`` server) that a mode manager manages (one
+        serves the part's ``get_mode``)? Looked up once ``change_state`` is found (which the call
+        needs anyway), the graph given :data:`GRAPH_SETTLE` s more to show who serves what."""
+        from lifecycle_msgs.srv import ChangeState
+
+        if not self._found(self._client(ChangeState, f"/{part}/change_state"), part):
+            return False  # the call that follows says what answers not
+        give_up = time.monotonic() + GRAPH_SETTLE
+        while True:
+            server = self._server_of(f"/{part}/change_state")
+            if server is not None and server != f"/{part}":
+                return False  # a system: its manager serves its lifecycle services
+            if server is not None and any(name == f"/{part}/get_mode" for name, _ in
+                                          self.node.get_service_names_and_types()):
+                return True  # a node of its own name, and a manager of it
+            if time.monotonic() >= give_up:
+                return False
+            time.sleep(0.05)
+
+    def _server_of(self, service: str) -> str | None:
+        """The fully qualified name of a node that serves ``service`` (as the graph shows it now)."""
+        for name, namespace in self.node.get_node_names_and_namespaces():
+            with contextlib.suppress(Exception):  # a node that left the graph meanwhile
+                if any(found == service for found, _ in self.node.get_service_names_and_types_by_node(name, namespace)):
+                    return f"{namespace.rstrip('/')}/{name}"
+        return None
 
     def state_after(self, part: str, seconds: float) -> str:
         """The node's state once ``seconds`` passed with no change, or more (each change starts

@@ -156,6 +156,12 @@ def test_with_no_manager_the_commands_say_what_to_check_within_the_timeout(
     assert (code, out) == (1, "")
     assert err == ("sm-bt: error: nothing answers /pilot/get_mode within 1.5 s: is a mode manager (`sm-bt manager "
                    "MODEL`) running, with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?\n")
+    # A state may be a node's own: both are said (with nothing running, nothing tells which amcl is).
+    code, out, err = sm_bt(capsys, "state", "get", "amcl", "--timeout", "1.5")
+    assert (code, out) == (1, "")
+    assert err == ("sm-bt: error: nothing answers /amcl/get_state within 1.5 s: if amcl is a node, is it running (its "
+                   "own lifecycle service answers this)? If a system, is its mode manager (`sm-bt manager MODEL`) "
+                   "running? Either with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE as this shell?\n")
 
 
 def test_a_system_whose_manager_answers_one_service_late_is_not_called_a_node(
