@@ -7,8 +7,8 @@
 (``py_trees_ros_interfaces/srv/{GetBlackboardVariables,OpenBlackboardStream,CloseBlackboardStream}``).
 Each open stream is a latched ``std_msgs/String`` topic of text, one ``name: value`` line per
 variable it asked for (all of them if none; only the ones of behaviours on the path ticked last
-with ``filter_on_visited_path``), published after a tick when that text changed, followed by the
-tick's blackboard activity when asked. A value shows as ``str(value)``; values are read by name,
+with ``filter_on_visited_path``), published after a tick when that text changed or a new reader
+came (the watcher subscribes volatile), followed by the tick's blackboard activity when asked. A value shows as ``str(value)``; values are read by name,
 not copied, so nothing on the blackboard has to be picklable.
 
 Service callbacks run in ``node``'s executor thread, the streams are published in the ticking
@@ -42,6 +42,7 @@ class _Stream:
     with_activity: bool
     last: str | None = None  # the text sent last
     keys: set[str] = field(default_factory=set)  # the keys shown last
+    readers: int = 0  # subscriptions matched when it was sent
 
 
 class BlackboardStreams:
@@ -129,9 +130,13 @@ class BlackboardStreams:
         names = self._names(stream)
         text = "\n".join(f"{name}: {_value(name)}" for name in names)
         activity = _activity(stream.keys | {name.split(".")[0] for name in names}) if stream.with_activity else ""
-        if text == stream.last and not activity:
+        # The watcher reads volatile: what went out before its subscription matched never reaches it,
+        # so a new reader gets the text again, and nothing is sent while nobody reads.
+        readers = stream.publisher.get_subscription_count()
+        if readers == 0 or (text == stream.last and not activity and readers <= stream.readers):
+            stream.readers = readers
             return
-        stream.last, stream.keys = text, {name.split(".")[0] for name in names}
+        stream.last, stream.keys, stream.readers = text, {name.split(".")[0] for name in names}, readers
         stream.publisher.publish(String(data=text + (f"\n{activity}" if activity else "")))
 
     def _names(self, stream: _Stream) -> list[str]:

@@ -8,6 +8,8 @@ before it (``<!-- readme-test: ... -->``, the same on every page, invisible on t
   one session), on the simulated backend; ``ros``: run in a fresh interpreter with the pilot's simulated rclpy nodes
   up; ``pytest``: a test file of a user's own, run by pytest (every test in it must pass);
   ``compile (why)``: compiled only, for what needs software no package index has;
+  ``py_trees_ros (why)``: compiled here, and run by ``make interop`` against py_trees_ros's
+  sources (tests/interop/interop_py_trees_ros.py);
 - ``yaml``: loaded as a model (strictly); ``file PATH``: the file holds exactly the block and
   loads; ``part of PATH``: the block's lines appear in that order in PATH, which loads;
 - ``xml``: ``file PATH, checked against MODEL``: the file holds the block and checks clean;
@@ -56,7 +58,8 @@ DIRECTIVE = re.compile(r"^<!-- readme-test: (.*) -->$")
 #: Directives each language accepts, with what they capture; a block without one uses "".
 KINDS: dict[str, list[tuple[str, re.Pattern[str]]]] = {
     "python": [("run", re.compile(r"")), ("ros", re.compile(r"ros \(.+\)")),
-               ("compile", re.compile(r"compile \(.+\)")), ("pytest", re.compile(r"pytest"))],
+               ("compile", re.compile(r"compile \(.+\)")), ("pytest", re.compile(r"pytest")),
+               ("py_trees_ros", re.compile(r"py_trees_ros \(.+\)"))],
     "yaml": [("model", re.compile(r"")), ("file", re.compile(r"file (\S+)")),
              ("part", re.compile(r"part of (\S+)"))],
     "xml": [("tree", re.compile(r"file (\S+), checked against (\S+)")),
@@ -203,7 +206,7 @@ def test_pytest_examples_pass_as_a_users_own_test_file(block: Block, tmp_path: P
     assert done.returncode == 0 and f"{tests} passed" in done.stdout, f"{block} failed:\n{done.stdout}{done.stderr}"
 
 
-@by_line(of_kind("compile"))
+@by_line(of_kind("compile", "py_trees_ros"))
 def test_python_examples_that_need_other_software_compile(block: Block) -> None:
     compile(block.code, block.page, "exec")
 

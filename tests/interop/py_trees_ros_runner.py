@@ -76,11 +76,12 @@ def recipe(sources: str, block_file: str, hold: str = "0") -> int:
     assert Path(py_trees_ros.__file__).is_relative_to(sources), py_trees_ros.__file__
     rclpy.init()
     mission = py_trees.composites.Sequence("Mission", memory=True, children=[
-        ModesToBlackboard(),
         ChangeState("Configure", "pilot", "configure", timeout=10.0),
         ChangeMode("Slow", "pilot", "f_slow_mode", timeout=10.0)])
-    # Once: py_trees_ros keeps ticking the root, and the mission must not start over while held.
-    root = py_trees.decorators.OneShot("Once", mission, py_trees.common.OneShotPolicy.ON_COMPLETION)
+    # The modes to the blackboard on every tick; the mission once (py_trees_ros keeps ticking the
+    # root, and the mission must not start over while held).
+    root = py_trees.composites.Sequence("Root", memory=False, children=[
+        ModesToBlackboard(), py_trees.decorators.OneShot("Once", mission, py_trees.common.OneShotPolicy.ON_COMPLETION)])
 
     def spin(node: Any) -> None:
         deadline = time.monotonic() + LIMIT

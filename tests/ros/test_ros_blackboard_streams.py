@@ -22,7 +22,8 @@ from sm_bt.sim import SimulatedSystem
 
 pytestmark = pytest.mark.ros
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: What py-trees-blackboard-watcher subscribes with: what went out before it matched never reaches it.
+VOLATILE = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
 @pytest.fixture(autouse=True)
@@ -53,8 +54,13 @@ def test_a_watcher_lists_opens_reads_and_closes_streams_of_the_modes() -> None:
             with lock:
                 received.append(message.data)
 
-        client.node.create_subscription(String, topic, got, LATCHED)
-        wait_until(lambda: bool(received), 10.0, "the blackboard as it is, at once")
+        client.node.create_subscription(String, topic, got, VOLATILE)
+
+        def ticked_and_received() -> bool:
+            tree.tick()
+            return bool(received)
+
+        wait_until(ticked_and_received, 10.0, "the blackboard as it is, once the reader matched", poll=0.05)
         assert received[0].splitlines()[:2] == ["/system_modes/amcl.state: unconfigured",
                                                 "/system_modes/pilot: unconfigured (no target)"]
 
