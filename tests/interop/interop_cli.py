@@ -1,20 +1,20 @@
-"""``sm-bt mode ...`` and ``sm-bt state ...``, every example of README.md, against the reference's
+"""``sm-bt mode ...`` and ``sm-bt state ...``, every example of the documentation, against the reference's
 mode manager (micro-ROS/system_modes ``mode_manager``, C++): what a user sees.
 
-README.md says these commands work against the reference's manager too. This module holds them
+The documentation says these commands work against the reference's manager too. This module holds them
 to it with the real reference (built by ``tools/reference/build.sh``; ``SM_BT_REFERENCE`` names its
 prefix, as ``make interop`` sets it) and the model's simulated nodes, both on the same
 reference-compatible model file (:func:`reference.reference_model`: the model without its
 ``__order__`` lines). It is named ``interop_cli.py``, not ``test_*.py``, so ``make test`` leaves it
 out (it needs the reference's build) and ``make interop`` runs it.
 
-The examples are read from README.md, so a new one is covered as soon as it is written: every
+The examples are read from README.md and docs/, so a new one is covered as soon as it is written: every
 ``sm-bt mode ...``/``sm-bt state ...`` line of a ``sh`` block, and every such ``$`` command of a
 ``text`` transcript, whose output must then also match the lines below it (``…`` standing for
 any text). Each runs on the model its block names (``run ros MODEL``), else the pilot, after the
 bring-up a user does first (``state set SYSTEM configure --wait``, then ``activate --wait``; a
-README line that is one of these is run as that step), state commands first, then the others in
-README order (a transcript in one piece, as written). What each must print follows from the
+documented line that is one of these is run as that step), state commands first, then the others in
+the pages' order (a transcript in one piece, as written). What each must print follows from the
 model and from what the commands before it confirmed: exit 0 and the confirmation line for a
 ``--wait``, the mode or state confirmed last for a ``get``, the model's modes for a ``list``,
 exit 2 with a name that is served for a name that is not.
@@ -26,7 +26,7 @@ laser_resender) is never reached. Such an example runs last, with ``--timeout 5`
 1 with ``not confirmed within 5 s: pilot is in mode ...`` after waiting those 5 s; every other
 example must succeed.
 
-Also checked, beyond the README's lines: ``state set`` with every transition on a node (through
+Also checked, beyond the documented lines: ``state set`` with every transition on a node (through
 its own service: the reference is not asked); on a system, through the reference,
 ``deactivate --wait`` then ``activate --wait``, after which the pilot is active again, in its
 default mode (the reference's ``activate`` means ``__DEFAULT__``); and a node's mode set through
@@ -70,7 +70,10 @@ from sm_bt.ros.client import TRANSITION_GOALS
 pytestmark = pytest.mark.ros
 
 ROOT = Path(__file__).resolve().parents[2]
-README = ROOT / "README.md"
+#: The pages whose examples run here: the README, then the documentation (its generated report aside).
+PAGES = [ROOT / "README.md", *sorted(path for path in (ROOT / "docs").rglob("*.md") if path.name != "interop.md")]
+#: A block's ``sm-bt manager MODEL`` line names the model its examples run on.
+MANAGER_LINE = re.compile(r"^sm-bt manager (\S+)")
 FENCE = re.compile(r"^```(\w*)\s*$")
 DIRECTIVE = re.compile(r"^<!-- readme-test: (.*) -->$")
 #: A transcript's directive that names the model it runs on.
@@ -79,8 +82,8 @@ RUN_ROS = re.compile(r"run ros (\S+)")
 DEFAULT_MODEL = "pilot"
 #: ``--timeout`` given to an example the reference cannot confirm: its wait ends then.
 BEYOND_REFERENCE_TIMEOUT = 5
-#: The examples README.md has now (its CLI section and the transcript below it): the ones found
-#: must include them, so that a change of the README's format cannot leave this module checking nothing.
+#: The examples the documentation has now (docs/cli.md): the ones found must include them, so that
+#: a change of the pages' format cannot leave this module checking nothing.
 DOCUMENTED = frozenset({
     "sm-bt mode get pilot",
     "sm-bt mode list pilot",
@@ -91,20 +94,21 @@ DOCUMENTED = frozenset({
 })
 #: The one example the reference gets wrong (see the module's docstring).
 DOCUMENTED_BEYOND_REFERENCE = frozenset({"sm-bt mode set pilot f_degraded_mode --wait"})
-#: The bring-up of a system, in order (README's ``state set pilot configure --wait`` is the first).
+#: The bring-up of a system, in order (docs/cli.md's ``state set pilot configure --wait`` is the first).
 BRING_UP = ("configure", "activate")
 #: The reference publishes what it infers on its 1 s timer: the longest wait for that tick.
 TICK_TIMEOUT = 3.0
 LOG_TAIL = 30
 
 
-# -- README's examples ---------------------------------------------------------------------------------
+# -- the documentation's examples ---------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
 class Example:
-    """One ``sm-bt mode``/``sm-bt state`` command of README.md."""
+    """One ``sm-bt mode``/``sm-bt state`` command of the documentation."""
 
+    page: Path
     line: int  # 1-based
     argv: tuple[str, ...]  # without the leading "sm-bt"
     model: str  # a bundled model's name or a path from the repository's root
@@ -117,16 +121,22 @@ class Example:
         return shlex.join(("sm-bt", *self.argv))
 
     def __str__(self) -> str:
-        return f"README.md:{self.line}: {self.command}"
+        return f"{self.page.relative_to(ROOT)}:{self.line}: {self.command}"
 
 
 def _is_example(argv: Sequence[str]) -> bool:
     return len(argv) > 2 and argv[0] == "sm-bt" and argv[1] in ("mode", "state")
 
 
-def readme_examples() -> list[Example]:
-    """Every ``sm-bt mode``/``sm-bt state`` command of README.md's ``sh`` and ``text`` blocks, in order."""
-    lines = README.read_text(encoding="utf-8").splitlines()
+def documented_examples() -> list[Example]:
+    """Every ``sm-bt mode``/``sm-bt state`` command of the pages' ``sh`` and ``text`` blocks, in order."""
+    return [example for page in PAGES for example in page_examples(page)]
+
+
+def page_examples(page: Path) -> list[Example]:
+    """The examples of one page: each on the model its block names (``run ros MODEL``, or an
+    ``sm-bt manager MODEL`` line in it), else the pilot."""
+    lines = page.read_text(encoding="utf-8").splitlines()
     examples: list[Example] = []
     index = 0
     while index < len(lines):
@@ -137,13 +147,15 @@ def readme_examples() -> list[Example]:
         end = next(at for at in range(index + 1, len(lines)) if lines[at].startswith("```"))
         directive = DIRECTIVE.match(lines[index - 1]) if index else None
         named = RUN_ROS.match(directive.group(1)) if directive else None
-        model = named.group(1) if named else DEFAULT_MODEL
         body = lines[index + 1:end]
+        served = next((found.group(1) for line in body if (found := MANAGER_LINE.match(line))
+                       and not found.group(1).isupper()), None)  # MODEL: a placeholder, not a model
+        model = named.group(1) if named else served or DEFAULT_MODEL
         if fence.group(1) == "sh":
             for offset, text in enumerate(body):
                 argv = shlex.split(text, comments=True)
                 if _is_example(argv):
-                    examples.append(Example(index + 2 + offset, tuple(argv[1:]), model, index + 1))
+                    examples.append(Example(page, index + 2 + offset, tuple(argv[1:]), model, index + 1))
         elif fence.group(1) == "text":
             for offset, text in enumerate(body):
                 if not text.startswith("$ "):
@@ -153,7 +165,8 @@ def readme_examples() -> list[Example]:
                     following = body[offset + 1:]
                     output = following[:next((at for at, line in enumerate(following) if line.startswith("$ ")),
                                              len(following))]
-                    examples.append(Example(index + 2 + offset, tuple(argv[1:]), model, index + 1, tuple(output)))
+                    examples.append(Example(page, index + 2 + offset, tuple(argv[1:]), model, index + 1,
+                                            tuple(output)))
         index = end + 1
     return examples
 
@@ -167,7 +180,7 @@ def parse(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def model_file(name: str) -> Path:
-    """A model named in README.md: a path from the repository's root, or a bundled model's name."""
+    """A model named in the documentation: a path from the repository's root, or a bundled model's name."""
     in_repository = ROOT / name
     return in_repository if in_repository.is_file() else bundled.resolve(name)
 
@@ -190,7 +203,7 @@ def beyond_reference(model: Model, argv: Sequence[str]) -> bool:
 
 @dataclass(frozen=True)
 class CliStep:
-    """A command to run: a README example, or (``example`` ``None``) a step of the bring-up."""
+    """A command to run: a documented example, or (``example`` ``None``) a step of the bring-up."""
 
     argv: tuple[str, ...]
     example: Example | None = None
@@ -200,12 +213,13 @@ class CliStep:
 
 
 def plan(model: Model, examples: Sequence[Example]) -> list[CliStep]:
-    """The order the examples of one model run in: the bring-up of every system they name (a README
-    line that is a bring-up step runs as that step), then the state commands, then the others in
-    README order (a transcript in one piece), those the reference cannot confirm last."""
+    """The order the examples of one model run in: the bring-up of every system they name (a
+    documented line that is a bring-up step runs as that step), then the state commands, then the
+    others in the pages' order (a transcript in one piece), those the reference cannot confirm last."""
     units: list[list[Example]] = []  # a sh line alone, a transcript's commands together
     for example in examples:
-        if example.transcript is not None and units and units[-1][0].block == example.block:
+        if example.transcript is not None and units and (units[-1][0].page, units[-1][0].block) == \
+                (example.page, example.block):
             units[-1].append(example)
         else:
             units.append([example])
@@ -236,8 +250,8 @@ def transcript_pattern(expected: Sequence[str]) -> re.Pattern[str]:
     return re.compile("".join(pieces))
 
 
-EXAMPLES = readme_examples()
-README_MODELS = sorted({example.model for example in EXAMPLES})
+EXAMPLES = documented_examples()
+DOCUMENTED_MODELS = sorted({example.model for example in EXAMPLES})
 
 
 # -- running them against the reference ----------------------------------------------------------------
@@ -275,7 +289,7 @@ class Running:
                  f"{took:.2f} s, stdout {out!r}, stderr {err!r}\nthe reference's log ends with:\n{self.log()}")
         if step.example is not None and step.example.transcript is not None:
             assert transcript_pattern(step.example.transcript).fullmatch(out + err), \
-                f"not what README.md shows ({step.example.transcript}): {where}"
+                f"not what {step.example.page.name} shows ({step.example.transcript}): {where}"
         part = args.part.lstrip("/")
         check: Callable[[argparse.Namespace, str, int, str, str, float, str], None] = {
             ("mode", "get"): self._mode_get, ("mode", "list"): self._mode_list, ("mode", "set"): self._mode_set,
@@ -464,12 +478,12 @@ def bring_up(running: Running, system: str) -> None:
 
 def test_the_readme_has_mode_and_state_examples_and_each_runs_on_a_model_that_has_its_part() -> None:
     commands = {example.command for example in EXAMPLES}
-    assert commands, "README.md has no `sm-bt mode`/`sm-bt state` example"
-    assert commands >= DOCUMENTED, f"not found in README.md: {sorted(DOCUMENTED - commands)}"
+    assert commands, "the documentation has no `sm-bt mode`/`sm-bt state` example"
+    assert commands >= DOCUMENTED, f"not found in the documentation: {sorted(DOCUMENTED - commands)}"
     transcript = {example.command for example in EXAMPLES if example.transcript is not None}
     # Read as a transcript's commands, so that what they print is compared with README.md too.
     assert transcript >= {"sm-bt mode set pilot f_nrmal_mode", "sm-bt mode set pilot f_normal_mode --wait"}
-    for name in README_MODELS:
+    for name in DOCUMENTED_MODELS:
         model = load_model(model_file(name))
         examples = [example for example in EXAMPLES if example.model == name]
         for example in examples:
@@ -483,7 +497,7 @@ def test_the_readme_has_mode_and_state_examples_and_each_runs_on_a_model_that_ha
 
 
 @pytest.mark.long
-@pytest.mark.parametrize("name", README_MODELS)
+@pytest.mark.parametrize("name", DOCUMENTED_MODELS)
 def test_every_readme_example_does_against_the_reference_what_the_readme_says(
         name: str, start_reference: Callable[[str], Running]) -> None:
     running = start_reference(name)
