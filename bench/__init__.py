@@ -2,5 +2,5 @@
 
 ``python -m bench`` runs the benchmark modules (each ``run(quick) -> list[Figure]``), prints a
 table with the goal beside each figure, and writes ``results.json`` and ``scaling.png`` under
-``build/bench/``. See README, "Performance".
+``build/bench/``. See docs/performance.md.
 """

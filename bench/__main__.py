@@ -1,7 +1,7 @@
 """``python -m bench [--quick] [--only NAMES] [--out DIR]``: run the benchmarks, print the table.
 
 Exit status 0 when every goal is met, 1 when one is not or a benchmark module failed, 2 for a
-usage error. Progress goes to stderr; stdout is the table (markdown, as in the README).
+usage error. Progress goes to stderr; stdout is the table (markdown, as in docs/performance.md).
 """
 
 from __future__ import annotations

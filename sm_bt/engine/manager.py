@@ -11,7 +11,7 @@ It is a façade over the pieces that do the work, each with its own module:
   tells the observers;
 * :mod:`~sm_bt.engine.ledger`: the targets and actuals, and the events their changes make;
 * :mod:`~sm_bt.engine.executions`: requests carried out (the last request wins; a refused request
-  changes nothing and is done at once; the semantics the README states);
+  changes nothing and is done at once; the semantics docs/manager.md states);
 * :mod:`~sm_bt.engine.presence`: what the backend reports of the nodes;
 * :mod:`~sm_bt.engine.divergences`, :mod:`~sm_bt.engine.responses` and
   :mod:`~sm_bt.engine.reactions`: divergences, their grace periods, and the rules and recovery

@@ -8,8 +8,9 @@
 Each open stream is a latched ``std_msgs/String`` topic of text, one ``name: value`` line per
 variable it asked for (all of them if none; only the ones of behaviours on the path ticked last
 with ``filter_on_visited_path``), published after a tick when that text changed or a new reader
-came (the watcher subscribes volatile), followed by the tick's blackboard activity when asked. A value shows as ``str(value)``; values are read by name,
-not copied, so nothing on the blackboard has to be picklable.
+came (the watcher subscribes volatile), followed by the tick's blackboard activity when asked. A
+value shows as ``str(value)``; values are read by name, not copied, so nothing on the blackboard
+has to be picklable.
 
 Service callbacks run in ``node``'s executor thread, the streams are published in the ticking
 thread; a lock keeps the streams consistent between them.

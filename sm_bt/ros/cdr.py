@@ -5,7 +5,7 @@ For every transition it asks for, the backend hears two ``lifecycle_msgs/Transit
 needs one field of each; for every parameter set, a ``rcl_interfaces/ParameterEvent`` (and every
 other node's on the robot, which it drops by name). Building the messages costs more than the
 rest of their handling, and many times what reading the needed fields from the bytes costs
-(README.md, "Performance").
+(docs/performance.md).
 
 The layouts are the messages' own, in plain CDR as the ROS 2 middlewares send them: a 4-byte
 encapsulation header (representation ``0x0000`` big-endian, ``0x0001`` little-endian), then the

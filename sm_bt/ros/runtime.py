@@ -27,7 +27,7 @@ has it (``events_executor=False``: the plain one): it dispatches from the middle
 notifications, without a wait set, which costs the manager's process less CPU on a change and
 when idle. Each wait lasts up to ``EVENTS_WAIT`` s and serves every event that comes meanwhile,
 back to back: a wait per event put a burst of answers behind itself. The measurements are in
-README.md, "Performance".
+docs/performance.md.
 ``close()`` stops in the order rclpy needs: the interface's executor, then the interface,
 the manager and backend, the other executors, the nodes and context.
 """
@@ -79,7 +79,7 @@ class RosRuntime:
     ``switch_interval``: if given, the interpreter's GIL switch interval (``sys.setswitchinterval``)
     while the runtime runs, put back by :meth:`close`; by default (``None``) the interpreter's own.
     Answers and events are handled in the executor thread that heard them, so a shorter interval
-    buys no latency here and costs CPU in handing the lock over (README.md, "Performance").
+    buys no latency here and costs CPU in handing the lock over (docs/performance.md).
     ``events_executor``: spin
     the backend's and the watching node with rclpy's ``EventsExecutor`` where there is one (see the
     module's doc).

@@ -156,7 +156,7 @@ def test_a_node_cleaned_up_by_itself_after_a_preempted_configure_can_be_driven_a
 def test_a_rule_does_not_undo_what_the_user_asked_for() -> None:
     """n2 failed by itself (recovery off), so s1 diverges with a fault. The user then asks for n0
     in M1, which makes s1's rule r1 (n0 is active.M1) true: the rule fires and takes n0 back to
-    inactive, against the README's "never against what a user asked for" (I3)."""
+    inactive, against docs/manager.md's "never against what a user asked for" (I3)."""
     check(Scenario(
         model="generated",
         model_text=USER_CHANGE_MODEL,

@@ -8,7 +8,7 @@ manager, then ``tests/interop/client.py`` (rclpy only) runs the scenario's steps
 its own; everything is stopped by PID (SIGINT, then SIGKILL) and each run has a ROS domain of its
 own. What the client saw goes to ``DIR/results.json``; ``DIR/report.md`` has a table per scenario
 (the answer, when ``get_mode``/``get_state`` showed the change, when the event did) and the summary
-that README.md quotes. The nodes' complaints (transitions they were sent in a state that has none)
+that docs/reference.md quotes. The nodes' complaints (transitions they were sent in a state that has none)
 and how each manager ended are counted as well.
 """
 

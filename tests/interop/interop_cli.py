@@ -481,7 +481,7 @@ def test_the_readme_has_mode_and_state_examples_and_each_runs_on_a_model_that_ha
     assert commands, "the documentation has no `sm-bt mode`/`sm-bt state` example"
     assert commands >= DOCUMENTED, f"not found in the documentation: {sorted(DOCUMENTED - commands)}"
     transcript = {example.command for example in EXAMPLES if example.transcript is not None}
-    # Read as a transcript's commands, so that what they print is compared with README.md too.
+    # Read as a transcript's commands, so that what they print is compared with the page too.
     assert transcript >= {"sm-bt mode set pilot f_nrmal_mode", "sm-bt mode set pilot f_normal_mode --wait"}
     for name in DOCUMENTED_MODELS:
         model = load_model(model_file(name))

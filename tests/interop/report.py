@@ -1,6 +1,6 @@
 """The side-by-side report of ``make interop`` (tests/interop/harness.py), in Markdown.
 
-First a summary (the table README.md quotes), then one table per scenario: for every step, what
+First a summary (the table docs/reference.md quotes), then one table per scenario: for every step, what
 each manager answered, when ``get_state``/``get_mode`` showed the expected value, when the event
 topic did, and, where it did not, where the part ended up.
 """

@@ -1,7 +1,7 @@
 """The backend's queue of reports: in order, one drainer at a time, run by the thread that heard them.
 
 What an rclpy callback (an answer, an event) reports is run by that thread when the callback is
-done, not handed to the clock's thread: a hop costs a wake-up on every change (README, Performance).
+done, not handed to the clock's thread: a hop costs a wake-up on every change (docs/performance.md).
 """
 
 from __future__ import annotations

@@ -85,7 +85,7 @@ def test_entities_come_and_go_from_another_thread_during_a_wait_and_are_served_a
 
 def test_one_wait_serves_a_burst_of_messages(spun: tuple[Any, _Spinner]) -> None:
     # A wait per message costs a set-up and a trip through the interpreter's lock each: a burst of
-    # answers (one per node of a change) then queues behind itself (README, "Performance", P2).
+    # answers (one per node of a change) then queues behind itself (docs/performance.md, P2).
     from std_msgs.msg import String
 
     node, spinner = spun

@@ -23,7 +23,7 @@ DDS across: every process the harness starts in a namespace gets ``ROS_AUTOMATIC
 the session's ``ROS_DOMAIN_ID``, a ``ROS_LOG_DIR`` in the harness's temp dir and a Fast DDS profile
 (``FASTRTPS_DEFAULT_PROFILES_FILE``) with a UDPv4 transport only: the namespaces share ``/dev/shm``, and
 Fast DDS's shared-memory transport would otherwise bypass the link. Its writers send a heartbeat every
-0.1 s (Fast DDS's default: 3 s), as the README advises for a lossy link: a lost sample is repaired only
+0.1 s (Fast DDS's default: 3 s), as docs/across-machines.md advises for a lossy link: a lost sample is repaired only
 after the writer's next heartbeat. Each namespace routes multicast
 (224.0.0.0/4) over its veth, so discovery is plain multicast, no static peers. The test process itself
 stays in the machine's own namespace with local-only discovery: whatever talks to the namespaced nodes

@@ -27,14 +27,14 @@ holds the scenario as Python, ready to paste into ``test_manager_regressions.py`
 * **I6** recovery ends: after healing, within bounded virtual time, no request is in flight and
   none starts during a quiet period; between two user requests, recovery restores a part at most
   ``recovery_attempts`` times unless it stayed on target for ``recovery_window`` in between (or,
-  with :data:`RESTART_RENEWS_BUDGET`, as the README has it, a new process of the node appeared).
+  with :data:`RESTART_RENEWS_BUDGET`, as docs/manager.md has it, a new process of the node appeared).
 * **I7** no behaviour with a timeout is RUNNING longer than its timeout (plus one tick) after it
   was initialised; a ``hold_mode`` subtree no longer than its timeout plus its child's run.
 * **I8** rules cascade (issue 10, item 2): once the manager settled after healing, no system is
   left off its target with a rule that applies (its ``if_target`` is the target, its ``if_part``
   is in the rule's state) when that part got there through a rule of its own: a sub-system's rule
   re-targeting it is a fault for the systems above, and their rules react. (A state the user
-  asked for explicitly is left alone, as the README says.)
+  asked for explicitly is left alone, as docs/manager.md says.)
 
 * **I10** a request succeeds only with every part it is about (``Request.parts``: its part, or a
   continuation's nodes) at its target at that moment.
@@ -84,7 +84,7 @@ FINAL_TIMEOUT = 600.0
 BUSY_REFUSAL = re.compile(r"cannot \w+ while")
 PREEMPTED = re.compile(r"preempted by request #(\d+)")
 #: I6's budget is whole again after a user request, or once the part stayed on target for the
-#: recovery window; the README ("Giving up") adds: when a new process of the node appears. Issue 10
+#: recovery window; docs/manager.md ("Giving up") adds: when a new process of the node appears. Issue 10
 #: states I6 without that clause: set False to hold an engine to it (healing, the harness
 #: repairing the world, gives the nodes it restarts a fresh budget either way).
 RESTART_RENEWS_BUDGET = True
