@@ -145,8 +145,8 @@ class Demo:
             if options.view is not None or options.record is not None:
                 self.view = attach_view(self.tree, self.manager, port=options.view, host=options.view_host,
                                         record=options.record)
-                if self.view.url:
-                    self.say(f"view: {self.view.url}")
+                if self.view.url:  # with --quiet too: without it the page cannot be found
+                    self._always(f"view: {self.view.url}")
             # Times from the start: a wall clock's raw (monotonic) reading means nothing to a reader.
             self.monitor = Monitor(self.manager, self.console, epoch=self.clock.now())
             self.tally = RunTally()
@@ -203,6 +203,13 @@ class Demo:
                 self._held.append((line, style))
                 return
         self.console.print(line, style=style or None, markup=False, soft_wrap=True)
+
+    def _always(self, text: str) -> None:
+        """``say`` even with --quiet (the view's address, and why the command has not ended)."""
+        if self.options.quiet:
+            self.console.print(text, markup=False, soft_wrap=True)
+        else:
+            self.say(text)
 
     def _hold(self) -> None:
         with self._lock:
@@ -380,7 +387,8 @@ class Demo:
         self.show()
         code = self.summary(time.monotonic() - started)
         if self.view is not None and self.view.url and self.options.linger:
-            self.say(f"the view stays at {self.view.url} until Ctrl-C")
+            self.view.finish()  # the page says the run is over
+            self._always(f"run over; the view stays at {self.view.url} until Ctrl-C")
             with contextlib.suppress(KeyboardInterrupt):
                 while True:
                     time.sleep(3600)

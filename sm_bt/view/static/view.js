@@ -1,36 +1,76 @@
-// sm_bt's view: the tree (py_trees_js), the modes, the run's bands and events, live from the
-// server's Server-Sent Events (/events), or a recording replayed.
+// sm_bt's view: the tree (tree.js, py_trees_js), the mode table, the run's timeline
+// (timeline.js) and its events, live from the server's Server-Sent Events (/events) or a
+// recording replayed. Frames carry what changed since the one before (sm_bt/view/frames.py);
+// the page keeps them all, with the whole state every CHECKPOINT frames, so that the scrubber
+// can show any tick.
+//
+// URL options: ?once (the run so far, then no more updates: a page to save, or a headless
+// browser's look), ?at=SECONDS (show that moment of the run), ?span=FROM,TO (the timeline's
+// window, in seconds), ?check (write the boxes of what must be in view into #layout-report, for
+// the tests).
 "use strict";
 
-// py_trees_js reads these two by name.
-var canvas_graph = py_trees.canvas.create_graph();
-var canvas_paper = py_trees.canvas.create_paper({graph: canvas_graph});
-window.addEventListener("resize", function () { py_trees.canvas.on_window_resize(canvas_paper); });
-
-// The tree of one frame on the canvas (py_trees_js lays it out again only when nodes are new).
-function drawTree(tree) {
-  canvas_paper.freeze();
-  var added = py_trees.canvas.update_graph({graph: canvas_graph, tree: tree});
-  if (added.length) {
-    py_trees.canvas.layout_graph({graph: canvas_graph});
-    added.forEach(function (node) {
-      var view = canvas_paper.findViewByModel(node);
-      view.listenTo(canvas_paper, "translate", view.updateBox);
-      view.listenTo(canvas_paper, "scale", view.updateBox);
-    });
-    canvas_paper.updateViews();
-    py_trees.canvas.scale_content_to_fit(canvas_paper);
-  }
-  canvas_paper.unfreeze();
-}
-
-var frames = [];       // every frame received, in order
-var shown = -1;        // the frame shown in the table and bands (-1: follow the latest)
-var eventsShown = 0;
+var CHECKPOINT = 32;
+var frames = [];      // every frame received, in order
+var checkpoints = []; // the whole state of frames 0, CHECKPOINT, 2 * CHECKPOINT, ...
+var latest = null;    // the whole state of the newest frame
+var shown = -1;       // the frame shown (-1: follow the newest)
+var listed = [];      // the events' list items, in order ({index, item})
+var later = 0;        // listed[later:] are after the frame shown
 var scrubber = document.getElementById("scrubber");
 var liveButton = document.getElementById("live");
-var STATE_COLOURS = {active: "#2e7d32", inactive: "#f9a825", unconfigured: "#616161", finalized: "#424242",
-                     unknown: "#37474f"};
+var eventList = document.getElementById("events");
+var options = new URLSearchParams(window.location.search);
+
+// The whole state after ``frame``: behaviours (py_trees_js's format), visited, blackboard, modes.
+function advance(state, frame) {
+  var next = {tick: frame.tick, time: frame.time, status: frame.status};
+  if (frame.key) {
+    next.behaviours = frame.behaviours;
+    next.root = rootOf(frame.behaviours);
+    next.visited = frame.visited;
+    next.blackboard = frame.blackboard || {};
+    next.modes = frame.modes;
+    return next;
+  }
+  next.root = state.root;
+  next.behaviours = state.behaviours;
+  if (frame.changes) {
+    next.behaviours = Object.assign({}, state.behaviours);
+    for (var id in frame.changes) { next.behaviours[id] = changed(state.behaviours[id], frame.changes[id]); }
+  }
+  next.visited = frame.visited || state.visited;
+  next.blackboard = frame.blackboard ? Object.assign({}, state.blackboard, frame.blackboard) : state.blackboard;
+  next.modes = frame.modes || state.modes;
+  return next;
+}
+
+function changed(behaviour, change) {
+  var next = Object.assign({}, behaviour);
+  next.data = Object.assign({}, behaviour.data);
+  if ("status" in change) { next.status = change.status; }
+  if ("feedback" in change) { next.data.Feedback = change.feedback; }
+  if ("details" in change) {
+    next.details = change.details;
+    if (change.details === "...") { delete next.data.Detail; } else { next.data.Detail = change.details; }
+  }
+  return next;
+}
+
+function rootOf(behaviours) {
+  var children = {};
+  Object.keys(behaviours).forEach(function (id) {
+    (behaviours[id].children || []).forEach(function (child) { children[child] = true; });
+  });
+  return Object.keys(behaviours).find(function (id) { return !children[id]; });
+}
+
+function stateAt(index) {
+  if (index === frames.length - 1) { return latest; }
+  var base = Math.floor(index / CHECKPOINT), state = checkpoints[base];
+  for (var i = base * CHECKPOINT + 1; i <= index; i++) { state = advance(state, frames[i]); }
+  return state;
+}
 
 function text(tag, content, cls) {
   var element = document.createElement(tag);
@@ -39,164 +79,165 @@ function text(tag, content, cls) {
   return element;
 }
 
-function showModes(frame) {
+// A table cell whose long names may wrap after a dot or an underscore (only if they must).
+function breakable(content) {
+  var cell = document.createElement("td");
+  content.split(/(?<=[._])/).forEach(function (piece, index) {
+    if (index) { cell.appendChild(document.createElement("wbr")); }
+    cell.appendChild(document.createTextNode(piece));
+  });
+  return cell;
+}
+
+function showModes(state) {
   var body = document.querySelector("#modes tbody");
   body.replaceChildren();
-  frame.modes.forEach(function (row) {
+  state.modes.forEach(function (row) {
     var tr = document.createElement("tr");
     tr.dataset.part = row.part;
     tr.className = row.kind + (row.error ? " error" : row.cause ? " diverging" : "");
-    tr.appendChild(text("td", row.part));
-    tr.appendChild(text("td", row.target || "-"));
-    tr.appendChild(text("td", row.actual + (row.inferred ? " (*)" : "")));
+    tr.appendChild(breakable(row.part));
+    tr.appendChild(breakable(row.target || "-"));
+    tr.appendChild(breakable(row.actual + (row.inferred ? " (*)" : "")));
     tr.appendChild(text("td", row.cause || ""));
     body.appendChild(tr);
   });
   var status = document.getElementById("status");
-  status.textContent = frame.status;
-  status.className = "status " + frame.status;
-  document.getElementById("clock").textContent = frame.time.toFixed(1) + " s";
-  document.getElementById("tick").textContent = "#" + frame.tick;
+  status.textContent = state.status;
+  status.className = "status " + state.status;
+  document.getElementById("clock").textContent = state.time.toFixed(1) + " s";
+  document.getElementById("tick").textContent = "#" + state.tick;
 }
 
-function addEvents(frame) {
-  var list = document.getElementById("events");
-  frame.events.forEach(function (event) {
-    if (event.kind === "actual" || event.kind === "target") { return; }  // the bands show those
+function addEvents(frame, index) {
+  (frame.events || []).forEach(function (event) {
     var item = text("li", event.time.toFixed(2) + " s  " + event.text, event.kind);
-    list.appendChild(item);
-    eventsShown += 1;
-  });
-  list.scrollTop = list.scrollHeight;
-}
-
-// One band per part: its actual state and mode over time, a tick where its target changed.
-function drawBands(upTo) {
-  var svg = document.getElementById("bands");
-  var last = frames[upTo];
-  if (!last) { return; }
-  var parts = last.modes.map(function (row) { return row.part; });
-  var width = svg.clientWidth || 600, label = 130, rowHeight = 18;
-  var end = Math.max(last.time, 1e-6), scale = (width - label - 4) / end;
-  svg.setAttribute("height", parts.length * rowHeight + 16);
-  svg.replaceChildren();
-  var ns = "http://www.w3.org/2000/svg";
-  parts.forEach(function (part, index) {
-    var y = index * rowHeight + 2;
-    var name = document.createElementNS(ns, "text");
-    name.setAttribute("x", 2); name.setAttribute("y", y + 12); name.textContent = part;
-    svg.appendChild(name);
-    var segment = null, lastTarget = null;
-    for (var i = 0; i <= upTo; i++) {
-      var row = frames[i].modes.find(function (r) { return r.part === part; });
-      if (!row) { continue; }
-      var key = row.actual + (row.error ? "!" : "");
-      if (!segment || segment.key !== key) {
-        if (segment) { segment.to = frames[i].time; }
-        segment = {key: key, row: row, from: frames[i].time, to: last.time};
-        bandRect(svg, ns, segment, y, label, scale, rowHeight);
-      } else {
-        svg.lastSegment.setAttribute("width", Math.max(1, (last.time - segment.from) * scale));
-      }
-      if (lastTarget !== null && row.target !== lastTarget) {
-        var mark = document.createElementNS(ns, "rect");
-        mark.setAttribute("x", label + frames[i].time * scale - 1); mark.setAttribute("y", y - 1);
-        mark.setAttribute("width", 2); mark.setAttribute("height", rowHeight - 2);
-        mark.setAttribute("fill", "#90caf9");
-        mark.appendChild(text("title", part + " targeted at " + row.target + " at " + frames[i].time.toFixed(2) + " s"));
-        svg.appendChild(mark);
-      }
-      lastTarget = row.target;
-    }
+    item.dataset.index = String(index);
+    eventList.appendChild(item);
+    listed.push({index: index, item: item});
+    if (shown >= 0) { item.classList.add("later"); } else { later = listed.length; }
   });
 }
 
-function bandRect(svg, ns, segment, y, label, scale, rowHeight) {
-  if (svg.lastSegment && svg.lastSegment.dataset.y === String(y)) {
-    svg.lastSegment.setAttribute("width", Math.max(1, (segment.from - Number(svg.lastSegment.dataset.from)) * scale));
+// The events up to the frame shown, the newest at the bottom of the list and those of its own
+// tick marked; later ones dimmed below it.
+function followEvents(index) {
+  var boundary = listed.length;
+  while (boundary > 0 && listed[boundary - 1].index > index) { boundary--; }
+  if (boundary < later) {
+    for (var i = boundary; i < later; i++) { listed[i].item.classList.add("later"); }
+  } else {
+    for (var j = later; j < boundary; j++) { listed[j].item.classList.remove("later"); }
   }
-  var rect = document.createElementNS(ns, "rect");
-  var state = segment.row.actual.split(".")[0];
-  rect.setAttribute("x", label + segment.from * scale); rect.setAttribute("y", y);
-  rect.setAttribute("width", Math.max(1, (segment.to - segment.from) * scale));
-  rect.setAttribute("height", rowHeight - 4);
-  rect.setAttribute("fill", segment.row.error ? "#b71c1c" : (STATE_COLOURS[state] || "#455a64"));
-  rect.dataset.y = String(y); rect.dataset.from = String(segment.from);
-  rect.appendChild(text("title", segment.row.actual + " from " + segment.from.toFixed(2) + " s"));
-  svg.appendChild(rect);
-  svg.lastSegment = rect;
-  var mode = segment.row.actual.split(".")[1];
-  if (mode) {
-    var label_ = document.createElementNS(ns, "text");
-    label_.setAttribute("x", label + segment.from * scale + 2); label_.setAttribute("y", y + 11);
-    label_.textContent = mode;
-    svg.appendChild(label_);
+  later = boundary;
+  eventList.querySelectorAll("li.now").forEach(function (item) { item.classList.remove("now"); });
+  for (var k = boundary - 1; k >= 0 && listed[k].index === listed[boundary - 1].index; k--) {
+    listed[k].item.classList.add("now");  // the newest events up to the tick shown
+  }
+  if (boundary > 0) {  // the newest of them in view, a few later ones below if there is room
+    var first = listed[k + 1].item, current = listed[boundary - 1].item;
+    var bottom = current.offsetTop + current.offsetHeight, height = eventList.clientHeight;
+    var room = boundary < listed.length ? Math.max(height * 0.75, bottom - first.offsetTop) : height;
+    eventList.scrollTop = Math.max(0, Math.min(first.offsetTop, bottom - Math.min(room, height)));
   }
 }
 
 function show(index) {
-  var frame = frames[index];
-  drawTree(frame.tree);
-  showModes(frame);
-  drawBands(index);
+  var state = stateAt(index);
+  treePane.draw(state);
+  showModes(state);
+  followEvents(index);
+  timeline.draw(state.time);
 }
 
 function receive(frame) {
+  if (!frames.length && !frame.key) { return; }  // a delta means nothing without its key frame
+  latest = advance(latest, frame);
   frames.push(frame);
-  addEvents(frame);
+  if ((frames.length - 1) % CHECKPOINT === 0) { checkpoints.push(latest); }
+  timeline.add(frame, latest.modes);
+  addEvents(frame, frames.length - 1);
   scrubber.max = String(frames.length - 1);
   scrubber.disabled = false;
   if (shown < 0) {
     scrubber.value = scrubber.max;
-    if (caughtUp) { showLatest(false); }
+    if (caughtUp) { scheduleDraw(); }
   }
 }
 
-// The tree, table and bands are redrawn at most every 100 ms (no timers: a page in the
-// background gets them throttled to a minute); the run so far is drawn once it has all come.
-var caughtUp = false, drawnAt = 0;
-function showLatest(force) {
-  var now = Date.now();
-  if (!frames.length || (!force && now - drawnAt < 100)) { return; }
-  drawnAt = now;
-  show(frames.length - 1);
+// Live frames are drawn at most every 100 ms: a tree ticking at 100 Hz must not keep the
+// browser busy. The run so far is drawn once it has all come.
+var caughtUp = false, drawPending = false;
+function scheduleDraw() {
+  if (drawPending) { return; }
+  drawPending = true;
+  setTimeout(function () {
+    drawPending = false;
+    if (shown < 0 && frames.length) { show(frames.length - 1); }
+  }, 100);
 }
 
-scrubber.addEventListener("input", function () {
-  var index = Number(scrubber.value);
-  shown = index === frames.length - 1 ? -1 : index;
+function select(index) {
+  shown = index >= frames.length - 1 ? -1 : index;
   liveButton.disabled = shown < 0;
+  scrubber.value = String(index);
   show(index);
-});
-liveButton.addEventListener("click", function () {
-  shown = -1;
-  liveButton.disabled = true;
-  scrubber.value = scrubber.max;
-  show(frames.length - 1);
-});
+}
+
+function frameAt(time) {
+  var index = 0;
+  while (index + 1 < frames.length && frames[index + 1].time <= time) { index++; }
+  return index;
+}
+
+scrubber.addEventListener("input", function () { select(Number(scrubber.value)); });
+liveButton.addEventListener("click", function () { select(frames.length - 1); });
+timeline.seek(function (time) { if (frames.length) { select(frameAt(time)); } });
+
+function reset() {
+  frames = []; checkpoints = []; latest = null; listed = []; later = 0; caughtUp = false;
+  eventList.replaceChildren();
+  timeline.reset();
+}
+
+function caughtUpNow() {
+  caughtUp = true;
+  if (options.has("span")) { timeline.zoom.apply(null, options.get("span").split(",").map(Number)); }
+  if (!frames.length) { return; }
+  if (options.has("at") && shown < 0) {
+    select(frameAt(Number(options.get("at"))));
+  } else {
+    select(shown < 0 ? frames.length - 1 : shown);
+  }
+}
 
 var source = new EventSource("/events");
 source.onmessage = function (message) { receive(JSON.parse(message.data)); };
-// /?once: the run so far, then no more updates (a page to save, or a headless browser's look).
-var once = new URLSearchParams(window.location.search).has("once");
+source.addEventListener("reset", reset);  // the server dropped frames this page had not read
 source.addEventListener("caught-up", function () {
-  caughtUp = true;
-  if (shown < 0) { showLatest(true); }
-  if (once) {
+  caughtUpNow();
+  if (options.has("once")) {
     source.close();
-    document.body.dataset.once = "true";
+    settled(function () { document.body.dataset.once = "true"; });
   }
 });
 source.addEventListener("end", function () {
-  caughtUp = true;
-  if (shown < 0) { showLatest(true); }
+  if (!caughtUp) { caughtUpNow(); } else if (shown < 0) { select(frames.length - 1); }
   source.close();
-  document.body.dataset.ended = "true";
-  var status = document.getElementById("status");
-  status.textContent = (frames.length ? frames[frames.length - 1].status : "no frames") + " (run over)";
+  document.getElementById("ended").hidden = false;
+  settled(function () { document.body.dataset.ended = "true"; });
 });
 source.onerror = function () {
   if (document.body.dataset.ended !== "true") {
     document.getElementById("status").textContent = "disconnected: retrying";
   }
 };
+
+// After the tree's views are drawn (jointjs renders asynchronously): ``then``, and the layout
+// report when asked for.
+function settled(then) {
+  setTimeout(function () {
+    if (options.has("check")) { layoutCheck.report(); }
+    then();
+  }, 300);
+}
