@@ -17,7 +17,6 @@ manager answers; 2 a part, mode or transition that is not served (with the close
 from __future__ import annotations
 
 import argparse
-import time
 from contextlib import AbstractContextManager
 from typing import Any
 
@@ -117,13 +116,12 @@ def run_mode(args: argparse.Namespace) -> int:
 
     def put(client: Any) -> int:
         client.check_mode(part, args.mode)
-        asked = time.monotonic()
         if not client.change_mode(part, args.mode):
             raise CliError(f"the manager refused mode {args.mode!r} for {part} (its log says why)")
         if not args.wait:
             print(f"{part}: change to {args.mode} accepted")
             return 0
-        seconds = client.wait_for_mode(part, args.mode, asked)
+        seconds = client.wait_for_mode(part, args.mode, client.sent)
         print(f"{part}: {args.mode} confirmed {seconds:.2f} s after the request")
         return 0
 
@@ -143,13 +141,12 @@ def run_state(args: argparse.Namespace) -> int:
             raise CliError(f"{part} is a node that a mode manager manages: it would take a transition it did not ask "
                            "for as a fault and undo it after its grace period. Ask the manager instead (a system's "
                            f"state or mode, or `sm-bt mode set {part} MODE`), or add --force to send it anyway")
-        asked = time.monotonic()
         if not client.change_state(part, args.transition):
             raise CliError(f"{part} refused the transition {args.transition!r} (from {client.get_state(part)})")
         if not args.wait:
             print(f"{part}: {args.transition} accepted" + (" (its mode manager may undo it)" if managed else ""))
             return 0
-        seconds = client.wait_for_state(part, args.transition, asked)
+        seconds = client.wait_for_state(part, args.transition, client.sent)
         reached = client.get_state(part)
         print(f"{part}: {reached} {seconds:.2f} s after the request")
         if managed:

@@ -84,6 +84,8 @@ class ModeClient:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._clients: dict[str, Any] = {}
+        #: When the last request went out (``time.monotonic()``), once its service was found.
+        self.sent = 0.0
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
@@ -128,6 +130,7 @@ class ModeClient:
         if not self._found(client, part):
             raise ManagerUnreachable(
                 f"nothing answers {name} within {self.timeout:g} s: " + self._what_to_check(part, service))
+        self.sent = time.monotonic()  # "after the request" counts from here: finding the service is not the manager's
         future = client.call_async(request)
         self.executor.spin_until_future_complete(future, timeout_sec=self.timeout)
         if not future.done():
