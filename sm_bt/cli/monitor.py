@@ -36,8 +36,9 @@ LIVE_STEP = 0.02  # finer in place, where intermediate states (configuring, ...)
 SETTLE = 1.0  # virtual seconds watched after the last request, without --duration
 DISCOVERY = 5.0  # --ros: wall seconds to wait for the model's nodes before the requests
 # --ros --change: wall seconds to look for another manager's services after the nodes were found
-# (a manager's endpoints are discovered independently of, and can arrive after, the nodes')
-MANAGER_LOOKOUT = 1.5
+# (a manager's endpoints are discovered independently of, and can arrive after, the nodes'; on a
+# loaded machine 1.5 s missed one, and two managers would undo each other's changes)
+MANAGER_LOOKOUT = 3.0
 #: Once one is found, how long the list of parts it serves must stay the same to be complete.
 MANAGER_SETTLE = 0.25
 ROS_NODE_NAME = "sm_bt_monitor"  # not the reference manager's name: a manager may run alongside

@@ -196,7 +196,8 @@ def test_trees_render_with_py_trees_display(tree: str) -> None:
 
 def test_tree_setup_without_world_is_a_clear_error() -> None:
     system = SimulatedSystem(bundled("pilot"))
-    with pytest.raises(RuntimeError, match=r"no world; set the tree up with tree.setup\(manager=manager, world="):
+    with pytest.raises(RuntimeError, match=r"no world: the pilot's actions drive a simulated robot, so its trees run in "
+                                           r"`sm-bt demo`.*tree.setup\(manager=manager, world=World\(\)\)"):
         system.tree(pilot.create_root())
 
 
