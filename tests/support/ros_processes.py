@@ -33,6 +33,8 @@ DISCOVERY_TIMEOUT = 10.0
 DISCOVERY_POLL = 0.02
 #: The first call after discovery takes about 0.1 s (the response path matches late).
 FIRST_CALL_TIMEOUT = 2.0
+#: Seconds a new client waits before its first request that must not be asked twice.
+RESPONSE_PATH_GRACE = 0.3
 #: Services that may be asked twice with no other effect (see :meth:`RosContext.call`).
 IDEMPOTENT = frozenset({"GetState", "GetMode", "GetAvailableModes", "GetAvailableStates", "GetAvailableTransitions",
                         "GetParameters", "ListParameters", "SetParameters", "SetParametersAtomically"})
@@ -205,6 +207,10 @@ class RosContext:
         if not client.service_is_ready():
             self.wait_for([client])
         first = client not in self._answered
+        if first and service_type.__name__ not in IDEMPOTENT:
+            # Asked once only: give the server's side of discovery (its answer's path to this new
+            # client) a moment, which the client cannot see (a fresh-clone run lost an activate so).
+            time.sleep(RESPONSE_PATH_GRACE)
         try:
             response = call(client, request, timeout)
         except AssertionError:
