@@ -10,7 +10,7 @@ import argparse
 import sys
 
 from sm_bt.cli.arguments import non_negative, port, positive_int
-from sm_bt.cli.common import PROG, CliError
+from sm_bt.cli.common import CliError, UsageError
 from sm_bt.trees.mission_xml import TreeFileError
 from sm_bt.trees.pilot.demo import DEGRADED_FOR, REPAIR_AT, TREES, Auto, Demo, Options
 
@@ -35,8 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--view", type=port, nargs="?", const=8765, default=None, metavar="PORT",
                         help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "
                              "(default port 8765; 0: any free port); it stays until Ctrl-C after the run")
-    parser.add_argument("--view-host", default="127.0.0.1", metavar="HOST",
-                        help="address the view listens on (default 127.0.0.1: this machine only)")
+    parser.add_argument("--host", default="127.0.0.1", metavar="HOST",
+                        help="with --view: the address it listens on (default 127.0.0.1: this machine only), "
+                             "as `sm-bt view --host`")
     parser.add_argument("--record", metavar="FILE.jsonl",
                         help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")
     parser.add_argument("--ros", action="store_true",
@@ -66,7 +67,7 @@ def _time(text: str) -> float | None:
 def run(args: argparse.Namespace) -> int:
     options = Options(laser_failure_at=args.laser_failure_at, laser_repair_at=args.laser_repair_at,
                       cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree, ros=args.ros,
-                      view=args.view, view_host=args.view_host, record=args.record, linger=args.view is not None)
+                      view=args.view, view_host=args.host, record=args.record, linger=args.view is not None)
     if not options.ros:
         try:
             return Demo(options).run()
@@ -74,15 +75,13 @@ def run(args: argparse.Namespace) -> int:
             print(error, file=sys.stderr)
             return 1
         except OSError as error:  # the view's port
-            print(f"sm-bt demo: error: cannot serve the view on {options.view_host}:{options.view}: "
-                  f"{error.strerror or error} (choose another port: --view PORT, 0 for any)", file=sys.stderr)
-            return 1
+            raise CliError(f"cannot serve the view on {options.view_host}:{options.view}: "
+                           f"{error.strerror or error} (choose another port: --view PORT, 0 for any)") from None
     from sm_bt.ros.environment import RosUnavailable
     from sm_bt.ros.node_process import NodesError  # needs no rclpy
 
     if not options.speed > 0:
-        print(f"{PROG} demo: error: --speed must be more than 0 with --ros", file=sys.stderr)
-        return 2
+        raise UsageError("--speed must be more than 0 with --ros")
     try:
         return Demo(options).run()
     except (RosUnavailable, NodesError) as error:
