@@ -114,7 +114,10 @@ class ModeClient:
         """Wait for ``client``'s service; :class:`UnknownName` as soon as discovery shows a manager
         serving other parts but not this one (a typo need not wait for the whole timeout)."""
         start = time.monotonic()
-        while not client.wait_for_service(timeout_sec=0.25):
+        # Polled every 20 ms: rclpy's wait_for_service sleeps 0.25 s between looks, which every
+        # service of a command paid at least once (the graph usually shows it within a few ms).
+        while not client.service_is_ready():
+            time.sleep(0.02)
             elapsed = time.monotonic() - start
             if elapsed >= DISCOVERY_GRACE or elapsed >= self.timeout:
                 served = self.served_parts()
