@@ -476,7 +476,7 @@ def bring_up(running: Running, system: str) -> None:
 # -- the tests -----------------------------------------------------------------------------------------
 
 
-def test_the_readme_has_mode_and_state_examples_and_each_runs_on_a_model_that_has_its_part() -> None:
+def test_the_documentation_has_mode_and_state_examples_and_each_runs_on_a_model_that_has_its_part() -> None:
     commands = {example.command for example in EXAMPLES}
     assert commands, "the documentation has no `sm-bt mode`/`sm-bt state` example"
     assert commands >= DOCUMENTED, f"not found in the documentation: {sorted(DOCUMENTED - commands)}"
@@ -489,7 +489,8 @@ def test_the_readme_has_mode_and_state_examples_and_each_runs_on_a_model_that_ha
         for example in examples:
             assert parse(example.argv).part.lstrip("/") in model.parts, f"{example}: not a part of {name}"
         steps = plan(model, examples)
-        assert sorted(step.example.line for step in steps if step.example) == [e.line for e in examples], name
+        assert sorted((step.example.page, step.example.line) for step in steps if step.example) == \
+            sorted((e.page, e.line) for e in examples), name
         assert all(step.argv[:2] == ("state", "set") for step in steps[:len(BRING_UP)]), steps
     beyond = {example.command for example in EXAMPLES
               if beyond_reference(load_model(model_file(example.model)), example.argv)}
@@ -498,7 +499,7 @@ def test_the_readme_has_mode_and_state_examples_and_each_runs_on_a_model_that_ha
 
 @pytest.mark.long
 @pytest.mark.parametrize("name", DOCUMENTED_MODELS)
-def test_every_readme_example_does_against_the_reference_what_the_readme_says(
+def test_every_documented_example_does_against_the_reference_what_its_page_says(
         name: str, start_reference: Callable[[str], Running]) -> None:
     running = start_reference(name)
     steps = plan(running.model, [example for example in EXAMPLES if example.model == name])
