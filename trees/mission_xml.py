@@ -329,8 +329,7 @@ class _Reader:
                      *(cls.__name__ for cls in bt_xml.DECORATOR_NODES.values())]
             self._issue(element, f"unknown node <{tag}>{did_you_mean(tag, known)} (import the module that "
                                  "defines it, or pass it in registry=)")
-            return
-        for child in element:
+        for child in element:  # an unknown node's children are checked too: every mistake in one run
             self._check(child)
 
     def _name(self, element: ET.Element) -> None:
