@@ -35,10 +35,8 @@ import os
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from xml.parsers import expat
 
 import py_trees
 from py_trees.common import Status
@@ -52,10 +50,13 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import Error
 from sm_bt.model.types import Model
+from sm_bt.trees.tree_documents import MAX_DEPTH, Documents, TreeIssue
+
+__all__ = ["MAX_DEPTH", "AlwaysFailure", "AlwaysRunning", "AlwaysSuccess", "TreeFileError", "TreeIssue", "check_tree",
+           "load_tree"]
 
 _REFERENCE = re.compile(r"\{[^{}]+\}")
 #: Deeper than this is refused (py_trees' builder recurses once per level).
-MAX_DEPTH = 100
 _COMPOSITES = {"sequence", "selector", "fallback", "parallel"}
 _REACTIVE = {"reactivesequence": "Sequence", "reactivefallback": "Fallback"}
 _PARALLEL_POLICIES = ("success_on_all", "success_on_one")
@@ -100,19 +101,6 @@ for _tag, _cls in (("Success", AlwaysSuccess), ("Failure", AlwaysFailure), ("Run
     register_ports_class(_tag, _cls)
 
 
-@dataclass(frozen=True)
-class TreeIssue:
-    """One mistake in a tree file, where it is."""
-
-    path: str
-    line: int  # 1-based; 0 when the file as a whole is at fault
-    message: str
-
-    def __str__(self) -> str:
-        where = f"{self.path}:{self.line}" if self.line else self.path
-        return f"{where}: error: {self.message}"
-
-
 class TreeFileError(Error):
     """A tree file could not be loaded; ``issues`` holds every mistake found, one per line of
     ``str(error)`` as ``file:line: error: message``."""
@@ -155,18 +143,18 @@ class _Reader:
         self.path = path
         self.model = model
         self.registry = registry
-        self.issues: list[TreeIssue] = []
-        self.where: dict[int, tuple[str, int]] = {}  # id(element) -> (file, line)
+        self.documents = Documents(path)
+        self.issues = self.documents.issues
+        self.trees = self.documents.trees
         self.display: dict[str, str] = {}  # internal name -> the name to show
-        self.trees: dict[str, ET.Element] = {}
 
     # -- reading ---------------------------------------------------------------------------------
 
     def build(self, main_tree: str | None, inputs: dict[str, str]) -> py_trees.behaviour.Behaviour:
-        document = self._read(self.path, seen=set())
+        document = self.documents.read(self.path, seen=set())
         if document is None:
             raise TreeFileError(self.issues)
-        main = self._main(document, main_tree)
+        main = self.documents.main(document, main_tree)
         if main is not None:
             for key, value in inputs.items():
                 main.set(key, value)
@@ -184,104 +172,7 @@ class _Reader:
         return root
 
     def _issue(self, element: ET.Element | None, message: str) -> None:
-        path, line = self.where.get(id(element), (str(self.path), 0)) if element is not None else (str(self.path), 0)
-        self.issues.append(TreeIssue(path, line, message))
-
-    def _read(self, path: Path, seen: set[Path]) -> ET.Element | None:
-        try:
-            data = path.read_bytes()
-        except OSError as error:
-            self.issues.append(TreeIssue(str(path), 0, f"cannot read it: {error.strerror or error}"))
-            return None
-        document = self._parse(path, data)
-        if document is None:
-            return None
-        seen = seen | {path.resolve()}
-        for child in list(document):
-            tag = child.tag.lower()
-            if tag in ("import", "include"):
-                document.remove(child)
-                self._import(child, path, seen)
-            elif tag == "behaviortree":
-                self._define(child)
-            elif tag in ("treenodesmodel", "treenodes"):
-                document.remove(child)  # Groot's palette: nothing to build
-            else:
-                self._issue(child, f"<{child.tag}> at the top level: expected <BehaviorTree ID=...>, "
-                                   "<Import src=...> or <Include file=...>")
-        return document
-
-    def _parse(self, path: Path, data: bytes) -> ET.Element | None:
-        parser = expat.ParserCreate()
-        stack: list[ET.Element] = []
-        found: list[ET.Element] = []
-
-        def start(tag: str, attributes: dict[str, str]) -> None:
-            element = ET.Element(tag, attributes)
-            self.where[id(element)] = (str(path), parser.CurrentLineNumber)
-            (stack[-1].append(element) if stack else found.append(element))
-            stack.append(element)
-            if len(stack) > MAX_DEPTH:
-                raise _Refused(f"nested more than {MAX_DEPTH} deep")
-
-        def refuse_doctype(*_: Any) -> None:
-            raise _Refused("a DOCTYPE (tree files need no entities; they are refused)")
-
-        parser.StartElementHandler = start
-        parser.EndElementHandler = lambda _tag: stack.pop()
-        parser.StartDoctypeDeclHandler = refuse_doctype
-        try:
-            parser.Parse(data, True)
-        except expat.ExpatError as error:
-            self.issues.append(TreeIssue(str(path), error.lineno, f"not well-formed XML: "
-                                         f"{expat.ErrorString(error.code)} (column {error.offset + 1})"))
-            return None
-        except _Refused as refused:
-            self.issues.append(TreeIssue(str(path), parser.CurrentLineNumber, str(refused)))
-            return None
-        if not found:
-            self.issues.append(TreeIssue(str(path), 1, "no root element"))
-            return None
-        return found[0]
-
-    def _import(self, element: ET.Element, importer: Path, seen: set[Path]) -> None:
-        src = element.get("src") or element.get("file") or element.get("path")
-        if not src:
-            self._issue(element, f"<{element.tag}> needs src=\"other.xml\"")
-            return
-        target = (importer.parent / src).resolve()
-        if target in seen:
-            self._issue(element, f"{src} imports itself (through {importer.name})")
-            return
-        document = self._read(target, seen)
-        if document is None:
-            if not target.exists():
-                self.issues.pop()
-                self._issue(element, f"cannot import {src}: no file {target}")
-            return
-
-    def _define(self, element: ET.Element) -> None:
-        identifier = element.get("ID")
-        if not identifier:
-            self._issue(element, "<BehaviorTree> needs an ID")
-        elif identifier in self.trees:
-            first = self.where.get(id(self.trees[identifier]), ("?", 0))
-            self._issue(element, f"tree {identifier!r} is defined twice (first at {first[0]}:{first[1]})")
-        else:
-            self.trees[identifier] = element
-
-    def _main(self, document: ET.Element, main_tree: str | None) -> ET.Element | None:
-        wanted = main_tree or document.get("main_tree_to_execute")
-        if wanted is None:
-            if len(self.trees) == 1:
-                return next(iter(self.trees.values()))
-            self._issue(document, "which tree is the main one? set main_tree_to_execute=\"ID\" "
-                                  f"(trees: {', '.join(self.trees) or 'none'})")
-            return None
-        if wanted not in self.trees:
-            self._issue(document, f"no tree {wanted!r} to execute{did_you_mean(wanted, self.trees)}")
-            return None
-        return self.trees[wanted]
+        self.documents.issue(element, message)
 
     # -- checking -----------------------------------------------------------------------------------
 
@@ -457,10 +348,6 @@ class _Reader:
                 if client.name.rsplit(".", 1)[-1] == internal:
                     object.__setattr__(client, "name", shown)
                     py_trees.blackboard.Blackboard.clients[client.id()] = shown
-
-
-class _Refused(Exception):
-    pass
 
 
 def _parameters(cls: type) -> dict[str, inspect.Parameter]:
