@@ -50,6 +50,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import Error
 from sm_bt.model.types import Model
+from sm_bt.trees.declared_nodes import STANDS_IN_FOR, stand_in
 from sm_bt.trees.tree_documents import MAX_DEPTH, Documents, TreeIssue
 
 __all__ = ["MAX_DEPTH", "AlwaysFailure", "AlwaysRunning", "AlwaysSuccess", "TreeFileError", "TreeIssue", "check_tree",
@@ -154,6 +155,9 @@ class _Reader:
         document = self.documents.read(self.path, seen=set())
         if document is None:
             raise TreeFileError(self.issues)
+        for node_id, declared in self.documents.declared.items():  # a class of its own wins
+            if node_id not in self.registry and declared.kind in STANDS_IN_FOR:
+                self.registry[node_id] = stand_in(declared)
         main = self.documents.main(document, main_tree)
         if main is not None:
             for key, value in inputs.items():
@@ -218,8 +222,14 @@ class _Reader:
         else:
             known = [*self.registry, "Sequence", "Fallback", "Selector", "Parallel", "SubTree",
                      *(cls.__name__ for cls in bt_xml.DECORATOR_NODES.values())]
-            self._issue(element, f"unknown node <{tag}>{did_you_mean(tag, known)} (import the module that "
-                                 "defines it, or pass it in registry=)")
+            declared = self.documents.declared.get(tag)
+            if declared is not None:
+                self._issue(element, f"<{tag}> is declared a {declared.kind} ({declared.path}:{declared.line}): only "
+                                     "declared Actions and Conditions run as stand-ins; a class for it is needed "
+                                     "(registry=)")
+            else:
+                self._issue(element, f"unknown node <{tag}>{did_you_mean(tag, known)} (declare it in "
+                                     "<TreeNodesModel> to run it as a stand-in, or pass its class in registry=)")
         for child in element:  # an unknown node's children are checked too: every mistake in one run
             self._check(child)
 

@@ -1,5 +1,6 @@
 """Tree files as read: parsed with each element's file and line, imports followed, the trees
-defined, and every mistake in them (:class:`TreeIssue`)."""
+defined, the node types declared in ``<TreeNodesModel>`` (:class:`Declared`), and every mistake in
+them (:class:`TreeIssue`)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,23 @@ from sm_bt.model.diagnostics import did_you_mean
 
 #: Elements nested deeper than this are refused (a tree file is not a way to exhaust the stack).
 MAX_DEPTH = 100
+#: The kinds of node ``<TreeNodesModel>`` declares (Groot2, BehaviorTree.CPP 4), by lower-case tag.
+KINDS = {"action": "Action", "condition": "Condition", "control": "Control", "decorator": "Decorator",
+         "subtree": "SubTree"}
+_PORTS = ("input_port", "output_port", "inout_port")
+
+
+@dataclass(frozen=True)
+class Declared:
+    """A node type that a ``<TreeNodesModel>`` declares: its kind, its ports (by direction) and
+    where the declaration is."""
+
+    node_id: str
+    kind: str  # one of KINDS' values
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    path: str
+    line: int
 
 
 @dataclass(frozen=True)
@@ -38,6 +56,7 @@ class Documents:
         self.issues: list[TreeIssue] = []
         self.where: dict[int, tuple[str, int]] = {}  # id(element) -> (file, line)
         self.trees: dict[str, ET.Element] = {}
+        self.declared: dict[str, Declared] = {}
 
     def issue(self, element: ET.Element | None, message: str) -> None:
         path, line = self.where.get(id(element), (str(self.path), 0)) if element is not None else (str(self.path), 0)
@@ -61,7 +80,8 @@ class Documents:
             elif tag == "behaviortree":
                 self._define(child)
             elif tag in ("treenodesmodel", "treenodes"):
-                document.remove(child)  # Groot's palette: nothing to build
+                document.remove(child)  # Groot's palette: declarations, nothing to build
+                self._declare(child)
             else:
                 self.issue(child, f"<{child.tag}> at the top level: expected <BehaviorTree ID=...>, "
                                    "<Import src=...> or <Include file=...>")
@@ -115,6 +135,27 @@ class Documents:
                 self.issues.pop()
                 self.issue(element, f"cannot import {src}: no file {target}")
             return
+
+    def _declare(self, model: ET.Element) -> None:
+        for element in model:
+            kind = KINDS.get(element.tag.lower())
+            node_id = element.get("ID")
+            if kind is None:
+                self.issue(element, f"<{element.tag}> in <TreeNodesModel>: expected one of "
+                                    f"{', '.join(f'<{k}>' for k in KINDS.values())}")
+                continue
+            if not node_id:
+                self.issue(element, f"<{element.tag}> in <TreeNodesModel> needs an ID")
+                continue
+            ports = {direction: tuple(port.get("name", "") for port in element if port.tag.lower() == direction)
+                     for direction in _PORTS}
+            path, line = self.where.get(id(element), (str(self.path), 0))
+            declared = Declared(node_id, kind, ports["input_port"] + ports["inout_port"],
+                                ports["output_port"] + ports["inout_port"], path, line)
+            first = self.declared.setdefault(node_id, declared)
+            if first.kind != kind:
+                self.issue(element, f"{node_id} is declared a {kind} here and a {first.kind} at "
+                                    f"{first.path}:{first.line}")
 
     def _define(self, element: ET.Element) -> None:
         identifier = element.get("ID")

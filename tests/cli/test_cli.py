@@ -139,8 +139,8 @@ def test_check_a_tree_file_against_the_model_given_with_it(capsys: pytest.Captur
     assert code == 1
     assert err.splitlines() == [f"{bad}:4: error: <ModeIs 'ModeIs'>: unknown part 'pilto' (did you mean 'pilot'?) "
                                 "(parts: pilot, amcl, controller_server, pointcloud_to_laser, laser_resender)",
-                                f"{bad}:5: error: unknown node <Bogus> (import the module that defines it, or pass "
-                                "it in registry=)", f"{bad}: failed (2 errors against pilot)",
+                                f"{bad}:5: error: unknown node <Bogus> (declare it in <TreeNodesModel> to run it as a "
+                                "stand-in, or pass its class in registry=)", f"{bad}: failed (2 errors against pilot)",
                                 "3 files checked, 1 failed"]
     assert out.splitlines()[-1] == f"{pilot.XML}: ok against pilot"  # the other files are still checked
 
