@@ -50,6 +50,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import Error
 from sm_bt.model.types import Model
+from sm_bt.trees import bt_cpp_nodes  # noqa: F401 (registers BehaviorTree.CPP's nodes under their tags)
 from sm_bt.trees.declared_nodes import STANDS_IN_FOR, stand_in
 from sm_bt.trees.tree_documents import MAX_DEPTH, Documents, TreeIssue
 

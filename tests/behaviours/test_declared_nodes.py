@@ -39,7 +39,7 @@ NAV = """<root main_tree_to_execute="MainTree" BTCPP_format="4">
       <input_port name="controller_id"/>
     </Action>
     <Condition ID="IsBatteryOk"><input_port name="min"/></Condition>
-    <Control ID="RecoveryNode"><input_port name="number_of_retries"/></Control>
+    <Decorator ID="DistanceController"><input_port name="distance"/></Decorator>
     <Action ID="ModeIs"><input_port name="part"/></Action>
   </TreeNodesModel>
 </root>
@@ -81,12 +81,12 @@ def test_a_declared_nodes_attributes_are_its_declared_ports(tmp_path: Path) -> N
                       "mean 'controller_id'?) (attributes: controller_id, name, path)"]
 
 
-def test_a_declared_control_node_needs_a_class_and_a_class_wins_over_a_declaration(tmp_path: Path) -> None:
-    path = _write(tmp_path, FOLLOW + '<RecoveryNode number_of_retries="2"><AlwaysSuccess/></RecoveryNode>'
+def test_a_declared_decorator_needs_a_class_and_a_class_wins_over_a_declaration(tmp_path: Path) -> None:
+    path = _write(tmp_path, FOLLOW + '<DistanceController distance="1.0"><AlwaysSuccess/></DistanceController>'
                                      '<ModeIs part="pilot" mode="f_normal_mode"/>')
     with pytest.raises(TreeFileError) as raised:
         load_tree(path, model=PILOT)
     # ModeIs is sm_bt's own (declared here as an Action with other ports): its class is used, no error.
     assert [str(issue) for issue in raised.value.issues] == [
-        f"{path}:7: error: <RecoveryNode> is declared a Control ({path}:21): only declared Actions and Conditions "
-        "run as stand-ins; a class for it is needed (registry=)"]
+        f"{path}:7: error: <DistanceController> is declared a Decorator ({path}:21): only declared Actions and "
+        "Conditions run as stand-ins; a class for it is needed (registry=)"]

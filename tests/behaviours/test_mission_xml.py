@@ -243,17 +243,17 @@ def test_regression_a_cut_reference_in_a_decorator_is_an_error_not_a_crash(tmp_p
 
 
 def test_every_unknown_node_is_listed_with_its_line_in_one_run(tmp_path: Path) -> None:
-    """A Nav2 tree: its nodes nest, and those below an unknown one were never looked at (only
-    <RecoveryNode> was reported); a known node below them is still checked against the model."""
+    """A Nav2 tree: its nodes nest, and those below an unknown one were never looked at (only the
+    outer node was reported); a known node below them is still checked against the model."""
     path = tmp_path / "nav.xml"
     path.write_text('<root main_tree_to_execute="MainTree">\n  <BehaviorTree ID="MainTree">\n'
-                    '    <RecoveryNode number_of_retries="6">\n      <PipelineSequence>\n'
+                    '    <GoalUpdater>\n      <SpeedController>\n'
                     '        <ComputePathToPose goal="{goal}" path="{path}"/>\n'
                     '        <ModeIs part="pilto" mode="f_normal_mode"/>\n'
-                    '      </PipelineSequence>\n      <FollowPath path="{path}"/>\n'
-                    '    </RecoveryNode>\n  </BehaviorTree>\n</root>\n')
+                    '      </SpeedController>\n      <FollowPath path="{path}"/>\n'
+                    '    </GoalUpdater>\n  </BehaviorTree>\n</root>\n')
     errors = _errors(path)
     assert [(error.split(":")[1], error.split("<")[1].split(">")[0].split(" ")[0]) for error in errors] == [
-        ("3", "RecoveryNode"), ("4", "PipelineSequence"), ("5", "ComputePathToPose"), ("6", "ModeIs"),
+        ("3", "GoalUpdater"), ("4", "SpeedController"), ("5", "ComputePathToPose"), ("6", "ModeIs"),
         ("8", "FollowPath")], errors
     assert "unknown part 'pilto'" in errors[3]
