@@ -52,7 +52,8 @@ from sm_bt.model.errors import Error
 from sm_bt.model.types import Model
 from sm_bt.trees import bt_cpp_nodes  # noqa: F401 (registers BehaviorTree.CPP's nodes under their tags)
 from sm_bt.trees.declared_nodes import STANDS_IN_FOR, stand_in
-from sm_bt.trees.tree_documents import MAX_DEPTH, Documents, TreeIssue
+from sm_bt.trees.stubs import Stub
+from sm_bt.trees.tree_documents import MAX_DEPTH, Declared, Documents, TreeIssue
 
 __all__ = ["MAX_DEPTH", "AlwaysFailure", "AlwaysRunning", "AlwaysSuccess", "TreeFileError", "TreeIssue", "check_tree",
            "load_tree"]
@@ -114,16 +115,19 @@ class TreeFileError(Error):
 
 def load_tree(path: str | os.PathLike[str], *, manager: ModeManager | None = None, model: Model | None = None,
               registry: Mapping[str, Any] | None = None, main_tree: str | None = None,
-              inputs: Mapping[str, object] | None = None) -> py_trees.behaviour.Behaviour:
+              inputs: Mapping[str, object] | None = None,
+              stubs: Mapping[str, Stub] | None = None) -> py_trees.behaviour.Behaviour:
     """Build the tree of the XML file at ``path``; raise :class:`TreeFileError` with every
     mistake found. With ``manager``, it is attached to the tree (:func:`attach_manager`) and its
     model checked against; ``model`` alone checks without attaching. ``registry`` adds or
     overrides node classes (tag -> class or ``functools.partial``) over py_trees' registry of
     ports classes (which holds every sm_bt behaviour and every imported ports class). ``inputs``
-    set the main tree's values (``<BehaviorTree ID="Pilot" cycles="2">``, read as ``{cycles}``)."""
+    set the main tree's values (``<BehaviorTree ID="Pilot" cycles="2">``, read as ``{cycles}``).
+    ``stubs`` (:func:`~sm_bt.trees.stubs.load_stubs`) say what stand-ins do: for a node the file
+    declares in ``<TreeNodesModel>``, or one it only names (then it is an Action)."""
     if manager is not None and model is None:
         model = manager.model
-    reader = _Reader(Path(path), model, {**get_ports_registry(), **(registry or {})})
+    reader = _Reader(Path(path), model, {**get_ports_registry(), **(registry or {})}, stubs or {})
     root = reader.build(main_tree, {key: str(value) for key, value in (inputs or {}).items()})
     if manager is not None:
         attach_manager(root, manager)
@@ -131,20 +135,23 @@ def load_tree(path: str | os.PathLike[str], *, manager: ModeManager | None = Non
 
 
 def check_tree(path: str | os.PathLike[str], model: Model | None = None, *,
-               registry: Mapping[str, Any] | None = None, main_tree: str | None = None) -> list[TreeIssue]:
+               registry: Mapping[str, Any] | None = None, main_tree: str | None = None,
+               stubs: Mapping[str, Stub] | None = None) -> list[TreeIssue]:
     """Every mistake in the tree file at ``path`` (empty when it loads), against ``model``."""
     try:
-        load_tree(path, model=model, registry=registry, main_tree=main_tree)
+        load_tree(path, model=model, registry=registry, main_tree=main_tree, stubs=stubs)
     except TreeFileError as error:
         return list(error.issues)
     return []
 
 
 class _Reader:
-    def __init__(self, path: Path, model: Model | None, registry: dict[str, Any]) -> None:
+    def __init__(self, path: Path, model: Model | None, registry: dict[str, Any], stubs: Mapping[str, Stub]) -> None:
         self.path = path
         self.model = model
         self.registry = registry
+        self.stubs = stubs
+        self.stubbed: set[str] = set()  # the stubs a node of the tree used
         self.documents = Documents(path)
         self.issues = self.documents.issues
         self.trees = self.documents.trees
@@ -158,13 +165,14 @@ class _Reader:
             raise TreeFileError(self.issues)
         for node_id, declared in self.documents.declared.items():  # a class of its own wins
             if node_id not in self.registry and declared.kind in STANDS_IN_FOR:
-                self.registry[node_id] = stand_in(declared)
+                self.registry[node_id] = stand_in(declared, self.stubs.get(node_id))
         main = self.documents.main(document, main_tree)
         if main is not None:
             for key, value in inputs.items():
                 main.set(key, value)
         for tree in self.trees.values():
             self._check_tree_element(tree)
+        self._check_stubs()
         if self.issues or main is None:
             raise TreeFileError(self.issues or [TreeIssue(str(self.path), 0, "no tree to build")])
         try:
@@ -214,6 +222,12 @@ class _Reader:
             self._check_subtree(element)
             return
         self._name(element)
+        if tag in self.stubs and tag not in self.registry:  # named only, stubbed: an Action
+            path, line = self.documents.where.get(id(element), (str(self.path), 0))
+            inputs = tuple(key for key in element.attrib if key != "name")
+            self.registry[tag] = stand_in(Declared(tag, "Action", inputs, (), path, line), self.stubs[tag])
+        if tag in self.stubs and getattr(self.registry.get(tag), "DECLARED", None) is not None:
+            self.stubbed.add(tag)
         if tag in self.registry:
             self._check_node(element, self.registry[tag])
         elif lower in _COMPOSITES:
@@ -233,6 +247,15 @@ class _Reader:
                                      "<TreeNodesModel> to run it as a stand-in, or pass its class in registry=)")
         for child in element:  # an unknown node's children are checked too: every mistake in one run
             self._check(child)
+
+    def _check_stubs(self) -> None:
+        for node_id, stub in self.stubs.items():
+            if node_id in self.stubbed:
+                continue
+            own = self.registry.get(node_id)
+            why = ("is a node sm_bt has: a stub stands in only for nodes it lacks"
+                   if own is not None and getattr(own, "DECLARED", None) is None else "is no node of the tree")
+            self.issues.append(TreeIssue(stub.path, stub.line, f"stub for {node_id}: {node_id} {why}"))
 
     def _name(self, element: ET.Element) -> None:
         internal = f"n{len(self.display)}"  # unique, so py_trees' duplicate-name check never trips

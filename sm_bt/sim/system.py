@@ -161,9 +161,10 @@ class SimulatedSystem:
     # -- trees --------------------------------------------------------------------------------------
 
     def tree(self, root: py_trees.behaviour.Behaviour, **setup: Any) -> py_trees.trees.BehaviourTree:
-        """A tree around ``root``, set up with this manager (and ``setup``'s other runtime objects)."""
+        """A tree around ``root``, set up with this manager and its clock (and ``setup``'s other
+        runtime objects)."""
         tree = py_trees.trees.BehaviourTree(root)
-        tree.setup(manager=self.manager, **setup)
+        tree.setup(**{"manager": self.manager, "clock": self.clock, **setup})
         return tree
 
     def tick_until(self, tree: py_trees.trees.BehaviourTree, condition: Callable[[], bool], *,
