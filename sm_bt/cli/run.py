@@ -1,0 +1,119 @@
+"""``sm-bt run MODEL TREE.xml``: any model with any mission tree, on simulated nodes.
+
+The tree is ticked at ``--rate`` ticks per (virtual) second, ``--speed`` virtual seconds per wall
+second (0: as fast as possible). Nodes the tree declares in ``<TreeNodesModel>`` or only names run
+as stand-ins, doing what ``--stubs FILE`` says (succeeding at once otherwise). It narrates on
+stderr what the manager does (requests, divergences, rules, recoveries: the manager's own log
+lines, stamped with the run's time) and each change of the root's status; it ends when the root
+ends, or at ``--until`` seconds, and exits 0 on SUCCESS (or still running at ``--until``), 1 on
+FAILURE or when the model, the tree or the stubs have mistakes (all of them said, with lines).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from collections.abc import Callable
+
+import py_trees
+from py_trees.common import Status
+
+from sm_bt.cli.arguments import non_negative
+from sm_bt.cli.common import load_or_report
+from sm_bt.sim import SimulatedSystem
+from sm_bt.trees.mission_xml import TreeFileError, load_tree
+from sm_bt.trees.stubs import Stub, load_stubs
+
+#: The run's own lines and the manager's, on stderr.
+log = logging.getLogger("sm_bt.run")
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be more than 0, not {text}")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("model", metavar="MODEL", help="model file, or a bundled model's name")
+    parser.add_argument("tree", metavar="TREE.xml", help="a mission tree in XML (BehaviorTree.CPP/Groot style)")
+    parser.add_argument("--stubs", metavar="FILE", help="what the declared or unknown nodes do (YAML or JSON: "
+                                                        "ID: {status: running, for: SECONDS, then: success})")
+    parser.add_argument("--rate", type=_positive, default=10.0, metavar="HZ",
+                        help="ticks per second of the run's (virtual) time (default 10)")
+    parser.add_argument("--speed", type=non_negative, default=10.0,
+                        help="virtual seconds per wall second; 0 runs as fast as possible (default 10)")
+    parser.add_argument("--until", type=_positive, default=None, metavar="SECONDS",
+                        help="stop after this many seconds of the run, if the tree has not ended")
+    parser.add_argument("--quiet", action="store_true", help="print only the summary")
+
+
+class _RunTime(logging.Formatter):
+    """``  12.30 s  message``: the run's time, not the wall clock's."""
+
+    def __init__(self, now: Callable[[], float]) -> None:
+        super().__init__()
+        self.now = now
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"{self.now():8.2f} s  {record.getMessage()}"
+
+
+def run(args: argparse.Namespace) -> int:
+    model = load_or_report(args.model, strict=True)
+    if model is None:
+        return 1
+    stubs: dict[str, Stub] = {}
+    if args.stubs:
+        stubs, issues = load_stubs(args.stubs)
+        if issues:
+            for issue in issues:
+                print(issue, file=sys.stderr)
+            print(f"{args.stubs}: failed ({len(issues)} error{'s' if len(issues) != 1 else ''})", file=sys.stderr)
+            return 1
+    with SimulatedSystem(model, record=False) as system:
+        try:
+            root = load_tree(args.tree, manager=system.manager, stubs=stubs)
+        except TreeFileError as error:
+            print(error, file=sys.stderr)
+            print(f"{args.tree}: failed ({len(error.issues)} error{'s' if len(error.issues) != 1 else ''})",
+                  file=sys.stderr)
+            return 1
+        tree = system.tree(root)
+        return _tick(system, tree, args)
+
+
+def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace) -> int:
+    """Tick until the root ends (or ``--until``), narrating; the exit code."""
+    clock = system.clock
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_RunTime(clock.now))
+    watched = [logging.getLogger("sm_bt.manager"), log]
+    for logger in watched:
+        logger.addHandler(handler)
+        logger.setLevel(logging.WARNING if args.quiet else logging.INFO)
+        logger.propagate = False
+    period = 1.0 / args.rate
+    shown: Status | None = None
+    try:
+        while True:
+            tree.tick()
+            status = tree.root.status
+            if status != shown:
+                log.info("%s %s", tree.root.name, status.value)
+                shown = status
+            if status in (Status.SUCCESS, Status.FAILURE) or (args.until is not None and clock.now() >= args.until):
+                break
+            system.run(period)
+            if args.speed > 0:
+                time.sleep(period / args.speed)
+    finally:
+        for logger in watched:
+            logger.removeHandler(handler)
+            logger.propagate = True
+    stopped = f" (stopped at --until {args.until:g} s)" if tree.root.status == Status.RUNNING else ""
+    print(f"{args.tree}: {tree.root.status.value} at {clock.now():.2f} s{stopped}")
+    return 1 if tree.root.status == Status.FAILURE else 0

@@ -1,0 +1,81 @@
+"""``sm-bt run MODEL TREE.xml``: a mission tree with stand-ins and stubs on simulated nodes, its
+narration, its summary and its exit status."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from sm_bt.cli import main
+
+TREE = """<root main_tree_to_execute="M">
+  <BehaviorTree ID="M">
+    <PipelineSequence name="Mission">
+      <ChangeMode part="pilot" mode="f_normal_mode" timeout="10"/>
+      <FollowPath path="{path}"/>
+      <IsStuck/>
+    </PipelineSequence>
+  </BehaviorTree>
+  <TreeNodesModel>
+    <Action ID="FollowPath"><input_port name="path"/></Action>
+  </TreeNodesModel>
+</root>
+"""
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str | Path) -> tuple[int, str, str]:
+    code = main([str(arg) for arg in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def tree(tmp_path: Path) -> Path:
+    path = tmp_path / "mission.xml"
+    path.write_text(TREE)
+    return path
+
+
+def _stubs(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "stubs.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_a_mission_with_stubs_runs_to_its_end_and_says_what_happened(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, tree: Path) -> None:
+    stubs = _stubs(tmp_path, "FollowPath: {status: running, for: 2.0, then: success}\nIsStuck: {status: success}\n")
+    code, out, err = run(capsys, "run", "pilot", tree, "--stubs", stubs, "--speed", "0")
+    assert (code, out) == (0, f"{tree}: SUCCESS at 2.10 s\n"), err
+    lines = [re.sub(r"#\d+", "#N", line) for line in err.splitlines()]  # request ids count per process
+    assert lines[0] == "    0.00 s  request #N change_mode pilot f_normal_mode started [tree]"
+    assert "    0.10 s  request #N change_mode pilot f_normal_mode succeeded in 0.10 s" in lines
+    assert lines[-1] == "    2.10 s  Mission SUCCESS"
+    # --quiet: the summary alone
+    assert run(capsys, "run", "pilot", tree, "--stubs", stubs, "--speed", "0", "--quiet") == (
+        0, f"{tree}: SUCCESS at 2.10 s\n", "")
+
+
+def test_a_failing_mission_exits_1_and_one_that_runs_on_stops_at_until(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, tree: Path) -> None:
+    code, out, _ = run(capsys, "run", "pilot", tree, "--stubs", _stubs(tmp_path, "IsStuck: {status: failure}\n"),
+                       "--speed", "0", "--quiet")
+    assert (code, out) == (1, f"{tree}: FAILURE at 0.10 s\n")
+    code, out, _ = run(capsys, "run", "pilot", tree, "--stubs", _stubs(tmp_path, "IsStuck: {status: running}\n"),
+                       "--speed", "0", "--quiet", "--until", "3")
+    assert (code, out) == (0, f"{tree}: RUNNING at 3.00 s (stopped at --until 3 s)\n")
+
+
+def test_mistakes_in_the_tree_or_the_stubs_are_all_said_and_exit_1(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, tree: Path) -> None:
+    code, out, err = run(capsys, "run", "pilot", tree, "--speed", "0")  # IsStuck: neither declared nor stubbed
+    assert (code, out) == (1, "")
+    assert err.splitlines() == [f"{tree}:6: error: unknown node <IsStuck> (declare it in <TreeNodesModel> to run it "
+                                "as a stand-in, or pass its class in registry=)", f"{tree}: failed (1 error)"]
+    stubs = _stubs(tmp_path, "IsStuck: {status: fine}\nFollowPth: {status: success}\n")
+    code, out, err = run(capsys, "run", "pilot", tree, "--stubs", stubs)
+    assert (code, out) == (1, "")
+    assert err.splitlines() == [f"{stubs}:1: error: IsStuck: status must be one of success, failure, running, not "
+                                "'fine'", f"{stubs}: failed (1 error)"]
