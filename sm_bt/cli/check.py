@@ -24,6 +24,7 @@ from typing import TypeVar
 
 from sm_bt.cli.common import CliError, add_lenient, bundled_names, load_or_report, plural, print_issues
 from sm_bt.model.types import Model, Severity
+from sm_bt.trees.stubs import Stub
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", metavar="MODEL",
                         help="check the tree files against this model (a file or a bundled name), unless a tree "
                              "names its own (<!-- sm_bt model: NAME -->)")
+    parser.add_argument("--stubs", metavar="FILE",
+                        help="what the tree files' declared or unknown nodes do when run (YAML or JSON; see sm-bt "
+                             "run): checked, and a node a stub names counts as known")
     add_lenient(parser)
     parser.add_argument("--reference", action="store_true",
                         help="also say which constructs of each model the reference manager (micro-ROS/system_modes) "
@@ -80,10 +84,13 @@ def run(args: argparse.Namespace) -> int:
         print_issues(model.warnings, sys.stdout)
         if args.reference:
             failed += not _guarded(name, args.debug, partial(_check_reference, model))
+    stubs = _stubs(args.stubs) if args.stubs and trees else {}
+    failed += stubs is None
     paired: dict[str, Model] = {}  # models named by trees or --model, loaded once each
     for tree in trees:
         against = _models_of(tree, args, models, paired)
-        failed += against is None or not _guarded(tree, args.debug, partial(_check_tree_file, tree, against))
+        failed += against is None or not _guarded(tree, args.debug,
+                                                  partial(_check_tree_file, tree, against, stubs or {}))
     if len(names) > 1 and (failed or len(names) > len(args.models)):  # a tally where one helps
         print(f"{plural(len(names), 'file')} checked, {failed} failed", file=sys.stderr if failed else sys.stdout)
     return 1 if failed else 0
@@ -128,7 +135,20 @@ def _models_of(tree: str, args: argparse.Namespace, given: list[tuple[str, Model
     return [(name, paired[name])]
 
 
-def _check_tree_file(tree: str, models: list[tuple[str, Model]]) -> bool:
+def _stubs(path: str) -> dict[str, Stub] | None:
+    """The stubs of ``path``, or ``None`` after saying what is wrong with it."""
+    from sm_bt.trees.stubs import load_stubs
+
+    stubs, issues = load_stubs(path)
+    for issue in issues:
+        print(issue, file=sys.stderr)
+    if issues:
+        print(f"{path}: failed ({plural(len(issues), 'error')})", file=sys.stderr)
+        return None
+    return stubs
+
+
+def _check_tree_file(tree: str, models: list[tuple[str, Model]], stubs: dict[str, Stub]) -> bool:
     """Check ``tree`` against each of ``models`` (or alone, without one); print what was found."""
     import sm_bt.trees.pilot  # noqa: F401 (registers the pilot's actions, which shipped trees use)
     from sm_bt.trees.mission_xml import check_tree
@@ -136,7 +156,7 @@ def _check_tree_file(tree: str, models: list[tuple[str, Model]]) -> bool:
     against: list[tuple[str, Model | None]] = list(models) or [("", None)]
     ok = True
     for name, model in against:
-        issues = check_tree(tree, model)
+        issues = check_tree(tree, model, stubs=stubs)
         for issue in issues:
             print(f"{issue} [against {name}]" if len(against) > 1 else issue, file=sys.stderr)
         ok = ok and not issues

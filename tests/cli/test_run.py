@@ -79,3 +79,12 @@ def test_mistakes_in_the_tree_or_the_stubs_are_all_said_and_exit_1(
     assert (code, out) == (1, "")
     assert err.splitlines() == [f"{stubs}:1: error: IsStuck: status must be one of success, failure, running, not "
                                 "'fine'", f"{stubs}: failed (1 error)"]
+
+
+def test_check_takes_the_stubs_too(capsys: pytest.CaptureFixture[str], tmp_path: Path, tree: Path) -> None:
+    stubs = _stubs(tmp_path, "IsStuck: {status: failure}\n")
+    code, out, err = run(capsys, "check", "pilot", tree, "--stubs", stubs)
+    assert (code, err) == (0, "") and out.splitlines()[-1] == f"{tree}: ok against pilot"
+    assert run(capsys, "check", "pilot", tree)[0] == 1  # without them, IsStuck is unknown
+    code, _, err = run(capsys, "check", "pilot", tree, "--stubs", _stubs(tmp_path, "IsStuck: {stat: failure}\n"))
+    assert code == 1 and f"{stubs}: failed (1 error)" in err.splitlines()
