@@ -20,8 +20,8 @@ from collections.abc import Callable
 import py_trees
 from py_trees.common import Status
 
-from sm_bt.cli.arguments import non_negative
-from sm_bt.cli.common import load_or_report
+from sm_bt.cli.arguments import non_negative, port
+from sm_bt.cli.common import CliError, load_or_report
 from sm_bt.sim import SimulatedSystem
 from sm_bt.trees.mission_xml import TreeFileError, load_tree
 from sm_bt.trees.stubs import Stub, load_stubs
@@ -49,6 +49,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--until", type=_positive, default=None, metavar="SECONDS",
                         help="stop after this many seconds of the run, if the tree has not ended")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
+    parser.add_argument("--view", type=port, nargs="?", const=8765, default=None, metavar="PORT",
+                        help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "
+                             "(default port 8765; 0: any free port); it stays until Ctrl-C after the run")
+    parser.add_argument("--host", default="127.0.0.1", metavar="HOST",
+                        help="with --view: the address it listens on (default 127.0.0.1: this machine only)")
+    parser.add_argument("--record", metavar="FILE.jsonl",
+                        help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")
 
 
 class _RunTime(logging.Formatter):
@@ -83,7 +90,35 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 1
         tree = system.tree(root)
-        return _tick(system, tree, args)
+        view = None
+        if args.view is not None or args.record:
+            from sm_bt.view import attach_view
+
+            try:
+                view = attach_view(tree, system.manager, port=args.view, host=args.host, record=args.record)
+            except OSError as error:
+                raise CliError(f"cannot serve the view on {args.host}:{args.view} or write {args.record}: "
+                               f"{error.strerror or error}") from None
+            if view.url:
+                print(f"view: {view.url}", file=sys.stderr, flush=True)
+        try:
+            code = _tick(system, tree, args)
+            if view is not None and view.url:
+                view.finish()
+                print(f"run over; the view stays at {view.url} until Ctrl-C", file=sys.stderr, flush=True)
+                _wait_for_interrupt()
+            return code
+        finally:
+            if view is not None:
+                view.close()
+
+
+def _wait_for_interrupt() -> None:
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
 
 
 def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace) -> int:

@@ -4,6 +4,10 @@ narration, its summary and its exit status."""
 from __future__ import annotations
 
 import re
+import signal
+import subprocess
+import sys
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -88,3 +92,36 @@ def test_check_takes_the_stubs_too(capsys: pytest.CaptureFixture[str], tmp_path:
     assert run(capsys, "check", "pilot", tree)[0] == 1  # without them, IsStuck is unknown
     code, _, err = run(capsys, "check", "pilot", tree, "--stubs", _stubs(tmp_path, "IsStuck: {stat: failure}\n"))
     assert code == 1 and f"{stubs}: failed (1 error)" in err.splitlines()
+
+
+def test_record_writes_the_run_for_sm_bt_view(capsys: pytest.CaptureFixture[str], tmp_path: Path, tree: Path) -> None:
+    from sm_bt.view import read_recording
+
+    stubs = _stubs(tmp_path, "FollowPath: {status: running, for: 2.0, then: success}\nIsStuck: {status: success}\n")
+    recording = tmp_path / "run.jsonl"
+    code, _, err = run(capsys, "run", "pilot", tree, "--stubs", stubs, "--speed", "0", "--quiet", "--record", recording)
+    assert code == 0, err
+    assert len(read_recording(recording)) >= 21  # a frame per tick: 2.1 s at 10 Hz
+
+
+def test_view_serves_the_run_and_stays_until_ctrl_c(tmp_path: Path, tree: Path) -> None:
+    stubs = _stubs(tmp_path, "IsStuck: {status: success}\n")
+    process = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "run", "pilot", str(tree), "--stubs", str(stubs),
+                                "--speed", "0", "--quiet", "--view", "0"], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stderr is not None
+        first = process.stderr.readline()
+        assert first.startswith("view: http://127.0.0.1:"), first
+        url = first.split(": ", 1)[1].strip()
+        assert process.stderr.readline() == f"run over; the view stays at {url} until Ctrl-C\n"
+        with urllib.request.urlopen(url, timeout=5) as page:
+            assert page.status == 200
+    finally:
+        process.send_signal(signal.SIGINT)
+        try:
+            out, _ = process.communicate(timeout=5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            out, _ = process.communicate(timeout=5)
+    assert process.returncode == 0 and out == f"{tree}: SUCCESS at 0.10 s\n"
