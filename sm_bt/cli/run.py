@@ -7,6 +7,8 @@ stderr what the manager does (requests, divergences, rules, recoveries: the mana
 lines, stamped with the run's time) and each change of the root's status; it ends when the root
 ends, or at ``--until`` seconds, and exits 0 on SUCCESS (or still running at ``--until``), 1 on
 FAILURE or when the model, the tree or the stubs have mistakes (all of them said, with lines).
+With ``--scenario FILE`` (:mod:`sm_bt.scenario`) its faults happen at their times, its
+expectations are judged, and the exit status is theirs: 1 when one failed.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from py_trees.common import Status
 
 from sm_bt.cli.arguments import non_negative, port
 from sm_bt.cli.common import CliError, load_or_report
+from sm_bt.scenario import Checks, load_scenario
 from sm_bt.sim import SimulatedSystem
 from sm_bt.trees.mission_xml import TreeFileError, load_tree
 from sm_bt.trees.stubs import Stub, load_stubs
@@ -48,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="virtual seconds per wall second; 0 runs as fast as possible (default 10)")
     parser.add_argument("--until", type=_positive, default=None, metavar="SECONDS",
                         help="stop after this many seconds of the run, if the tree has not ended")
+    parser.add_argument("--scenario", metavar="FILE",
+                        help="faults on a timeline and what must hold (YAML: events, expect); exit 1 if an "
+                             "expectation fails")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
     parser.add_argument("--view", type=port, nargs="?", const=8765, default=None, metavar="PORT",
                         help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "
@@ -81,6 +87,14 @@ def run(args: argparse.Namespace) -> int:
                 print(issue, file=sys.stderr)
             print(f"{args.stubs}: failed ({len(issues)} error{'s' if len(issues) != 1 else ''})", file=sys.stderr)
             return 1
+    scenario = None
+    if args.scenario:
+        scenario, issues = load_scenario(args.scenario, model)
+        if issues:
+            for issue in issues:
+                print(issue, file=sys.stderr)
+            print(f"{args.scenario}: failed ({len(issues)} error{'s' if len(issues) != 1 else ''})", file=sys.stderr)
+            return 1
     with SimulatedSystem(model, record=False) as system:
         try:
             root = load_tree(args.tree, manager=system.manager, stubs=stubs)
@@ -102,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
             if view.url:
                 print(f"view: {view.url}", file=sys.stderr, flush=True)
         try:
-            code = _tick(system, tree, args)
+            checks = Checks(scenario, system) if scenario is not None else None
+            code = _tick(system, tree, args, checks)
             if view is not None and view.url:
                 view.finish()
                 print(f"run over; the view stays at {view.url} until Ctrl-C", file=sys.stderr, flush=True)
@@ -121,8 +136,9 @@ def _wait_for_interrupt() -> None:
         pass
 
 
-def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace) -> int:
-    """Tick until the root ends (or ``--until``), narrating; the exit code."""
+def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace,
+          checks: Checks | None) -> int:
+    """Tick until the root ends (or ``--until``), narrating and applying the scenario; the exit code."""
     clock = system.clock
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(_RunTime(clock.now))
@@ -136,6 +152,8 @@ def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: arg
     try:
         while True:
             tree.tick()
+            if checks is not None:
+                checks.at(clock.now())
             status = tree.root.status
             if status != shown:
                 log.info("%s %s", tree.root.name, status.value)
@@ -151,4 +169,11 @@ def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: arg
             logger.propagate = True
     stopped = f" (stopped at --until {args.until:g} s)" if tree.root.status == Status.RUNNING else ""
     print(f"{args.tree}: {tree.root.status.value} at {clock.now():.2f} s{stopped}")
-    return 1 if tree.root.status == Status.FAILURE else 0
+    if checks is None:
+        return 1 if tree.root.status == Status.FAILURE else 0
+    checks.end(str(tree.root.status.value), clock.now())
+    held, failed = len(checks.passed), len(checks.failures)
+    print(f"{args.scenario}: {held} of {held + failed} expectations held")
+    for failure in checks.failures:
+        print(f"  FAILED {failure}")
+    return 1 if failed else 0

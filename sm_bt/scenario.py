@@ -1,0 +1,316 @@
+"""Scenarios: faults on a timeline and what must hold, for a mission run on simulated nodes.
+
+A scenario file (YAML) has ``events`` (each at a time of the run, in seconds) and ``expect``::
+
+    events:
+      - {at: 5.0, crash: laser_resender}            # also vanish, restart: NODE
+      - {at: 6.0, fail_next: {node: amcl, transition: activate}}
+      - {at: 7.0, hang_next: {node: amcl, transition: configure}}
+      - {at: 8.0, reject_parameters: {node: controller_server, reason: busy}}   # reason: null clears
+      - {at: 9.0, set_parameter: {node: controller_server, name: max_vel, value: 0.2}}
+      - {at: 10, request: {pilot: f_degraded_mode}}  # a mode asked from outside (an operator)
+    expect:
+      - {at: 3.0, modes: {pilot: active.f_normal_mode, amcl: active}}   # what holds then
+      - {never: {laser_resender: finalized}}         # at no tick of the run
+      - {tree: SUCCESS}                              # how the tree ends
+
+:func:`load_scenario` reads it against a model, every mistake with its line; :class:`Checks`
+applies the events and judges the expectations as a run goes (``sm-bt run --scenario``).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition, transition_by_label
+from sm_bt.model.diagnostics import did_you_mean
+from sm_bt.model.states import State, StateMode
+from sm_bt.model.types import Model, NodePart
+from sm_bt.sim import SimulatedSystem
+from sm_bt.trees.tree_documents import TreeIssue
+
+_NODE_EVENTS = ("crash", "vanish", "restart")
+_NODE_TRANSITION_EVENTS = ("fail_next", "hang_next")
+EVENTS = (*_NODE_EVENTS, *_NODE_TRANSITION_EVENTS, "reject_parameters", "set_parameter", "request")
+_TREE_ENDS = ("SUCCESS", "FAILURE", "RUNNING")
+
+
+@dataclass(frozen=True)
+class Event:
+    at: float
+    kind: str
+    args: dict[str, Any]
+    line: int
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """``at`` (seconds) with ``modes``; ``never`` (``at`` None); or the ``tree``'s end."""
+
+    line: int
+    at: float | None = None
+    modes: dict[str, StateMode] = field(default_factory=dict)
+    never: dict[str, StateMode] = field(default_factory=dict)
+    tree: str | None = None
+
+
+@dataclass(frozen=True)
+class Scenario:
+    path: str
+    events: tuple[Event, ...]
+    expectations: tuple[Expectation, ...]
+
+
+def load_scenario(path: str | os.PathLike[str], model: Model) -> tuple[Scenario, list[TreeIssue]]:
+    """The scenario of the file at ``path``, read against ``model``, and every mistake in it."""
+    reader = _Reader(str(path), model)
+    return reader.read(), reader.issues
+
+
+class _Reader:
+    def __init__(self, path: str, model: Model) -> None:
+        self.path = path
+        self.model = model
+        self.issues: list[TreeIssue] = []
+
+    def wrong(self, node: yaml.Node | None, message: str) -> None:
+        self.issues.append(TreeIssue(self.path, node.start_mark.line + 1 if node is not None else 0, message))
+
+    def read(self) -> Scenario:
+        empty = Scenario(self.path, (), ())
+        try:
+            document = yaml.compose(Path(self.path).read_text(encoding="utf-8"), Loader=yaml.SafeLoader)
+        except OSError as error:
+            self.wrong(None, f"cannot read it: {error.strerror or error}")
+            return empty
+        except yaml.YAMLError as error:
+            mark = getattr(error, "problem_mark", None)
+            self.issues.append(TreeIssue(self.path, mark.line + 1 if mark else 0,
+                                         f"not YAML: {getattr(error, 'problem', error)}"))
+            return empty
+        if not isinstance(document, yaml.MappingNode):
+            self.wrong(document, "a scenario is a mapping with events: and expect:")
+            return empty
+        events: list[Event] = []
+        expectations: list[Expectation] = []
+        for key, value in document.value:
+            if key.value == "events":
+                events = [event for node in self._list(value) if (event := self._event(node)) is not None]
+            elif key.value == "expect":
+                expectations = [expected for node in self._list(value)
+                                if (expected := self._expectation(node)) is not None]
+            else:
+                self.wrong(key, f"no section {key.value!r}{did_you_mean(str(key.value), ('events', 'expect'))} "
+                                "(sections: events, expect)")
+        return Scenario(self.path, tuple(sorted(events, key=lambda e: e.at)), tuple(expectations))
+
+    def _list(self, node: yaml.Node) -> list[yaml.Node]:
+        if not isinstance(node, yaml.SequenceNode):
+            self.wrong(node, "a list is expected here (- {at: ..., ...})")
+            return []
+        return list(node.value)
+
+    def _fields(self, node: yaml.Node) -> dict[str, yaml.Node] | None:
+        if not isinstance(node, yaml.MappingNode):
+            self.wrong(node, "a mapping is expected here ({at: SECONDS, ...})")
+            return None
+        return {str(key.value): value for key, value in node.value}
+
+    def _seconds(self, node: yaml.Node) -> float | None:
+        try:
+            seconds = float(node.value)
+        except (TypeError, ValueError):
+            seconds = -1.0
+        if not seconds >= 0:
+            self.wrong(node, f"at is seconds of the run (0 or more), not {node.value!r}")
+            return None
+        return seconds
+
+    def _node(self, node: yaml.Node) -> str | None:
+        name = str(node.value)
+        if not isinstance(self.model.parts.get(name), NodePart):
+            nodes = [n.name for n in self.model.nodes]
+            self.wrong(node, f"{name!r} is not a node of the model{did_you_mean(name, nodes)}")
+            return None
+        return name
+
+    def _event(self, node: yaml.Node) -> Event | None:
+        fields = self._fields(node)
+        if fields is None:
+            return None
+        line = node.start_mark.line + 1
+        kinds = [key for key in fields if key != "at"]
+        if "at" not in fields or len(kinds) != 1:
+            self.wrong(node, f"an event is {{at: SECONDS, KIND: ...}} with one kind of {', '.join(EVENTS)}")
+            return None
+        kind, value = kinds[0], fields[kinds[0]]
+        at = self._seconds(fields["at"])
+        if kind not in EVENTS:
+            self.wrong(node, f"no event {kind!r}{did_you_mean(kind, EVENTS)} (events: {', '.join(EVENTS)})")
+            return None
+        args = self._event_args(kind, value)
+        return None if at is None or args is None else Event(at, kind, args, line)
+
+    def _event_args(self, kind: str, value: yaml.Node) -> dict[str, Any] | None:
+        if kind in _NODE_EVENTS:
+            node = self._node(value)
+            return None if node is None else {"node": node}
+        if kind == "request":
+            wanted = self._modes(value, system_modes=True)
+            return None if wanted is None else {"modes": wanted}
+        fields = self._fields(value)
+        if fields is None:
+            return None
+        needs = {"fail_next": ("node", "transition"), "hang_next": ("node", "transition"),
+                 "reject_parameters": ("node", "reason"), "set_parameter": ("node", "name", "value")}[kind]
+        if set(fields) != set(needs):
+            self.wrong(value, f"{kind} takes {', '.join(needs)}")
+            return None
+        node = self._node(fields["node"])
+        if node is None:
+            return None
+        args: dict[str, Any] = {"node": node}
+        if "transition" in fields:
+            label = str(fields["transition"].value)
+            if label not in REQUESTABLE_LABELS:
+                hint = did_you_mean(label, REQUESTABLE_LABELS)
+                self.wrong(fields["transition"], f"{label!r} is not a transition{hint} "
+                                                 f"(transitions: {', '.join(REQUESTABLE_LABELS)})")
+                return None
+            args["transition"] = transition_by_label(label, State.UNCONFIGURED)
+        for name in ("reason", "name"):
+            if name in fields:
+                args[name] = None if fields[name].value in ("null", "~", "") else str(fields[name].value)
+        if "value" in fields:
+            args["value"] = yaml.safe_load(yaml.serialize(fields["value"]))
+        return args
+
+    def _modes(self, node: yaml.Node, *, system_modes: bool = False) -> dict[str, StateMode] | None:
+        fields = self._fields(node)
+        if fields is None:
+            return None
+        found: dict[str, StateMode] = {}
+        for part, value in fields.items():
+            if part not in self.model.parts:
+                self.wrong(value, f"no part {part!r}{did_you_mean(part, self.model.parts)}")
+                return None
+            text = str(value.value)
+            try:
+                found[part] = StateMode(State.ACTIVE, text) if system_modes else StateMode.parse(text)
+            except ValueError as error:
+                self.wrong(value, f"{part}: {error}")
+                return None
+            mode = found[part].mode
+            if mode is not None and mode not in self.model.parts[part].modes:
+                modes = self.model.parts[part].modes
+                self.wrong(value, f"{part} has no mode {mode!r}{did_you_mean(mode, modes)} (modes: {', '.join(modes)})")
+                return None
+        return found
+
+    def _expectation(self, node: yaml.Node) -> Expectation | None:
+        fields = self._fields(node)
+        if fields is None:
+            return None
+        line = node.start_mark.line + 1
+        if "tree" in fields and len(fields) == 1:
+            end = str(fields["tree"].value).upper()
+            if end not in _TREE_ENDS:
+                self.wrong(fields["tree"], f"tree ends as one of {', '.join(_TREE_ENDS)}, not {fields['tree'].value!r}")
+                return None
+            return Expectation(line, tree=end)
+        if "never" in fields and len(fields) == 1:
+            never = self._modes(fields["never"])
+            return None if never is None else Expectation(line, never=never)
+        if set(fields) == {"at", "modes"}:
+            at, modes = self._seconds(fields["at"]), self._modes(fields["modes"])
+            return None if at is None or modes is None else Expectation(line, at=at, modes=modes)
+        self.wrong(node, "an expectation is {at: SECONDS, modes: {PART: STATE[.MODE]}}, {never: {PART: "
+                         "STATE[.MODE]}} or {tree: SUCCESS|FAILURE|RUNNING}")
+        return None
+
+
+def holds(actual: Any, wanted: StateMode) -> bool:
+    """Does the part's ``actual`` match ``wanted`` (its state; and its mode, when one is given)?"""
+    return bool(actual.state is wanted.state and (wanted.mode is None or actual.mode == wanted.mode))
+
+
+class Checks:
+    """A scenario applied to a run: :meth:`at` after every tick (the events due, the expectations
+    due), :meth:`end` with the tree's final status; ``failures`` says what did not hold, with the
+    scenario's line."""
+
+    def __init__(self, scenario: Scenario, system: SimulatedSystem) -> None:
+        self.scenario = scenario
+        self.system = system
+        self.pending = list(scenario.events)
+        self.due = sorted((e for e in scenario.expectations if e.at is not None), key=lambda e: e.at or 0.0)
+        self.failures: list[str] = []
+        self.passed: list[str] = []
+        self._broken: set[tuple[int, str]] = set()
+
+    def at(self, now: float) -> None:
+        while self.pending and self.pending[0].at <= now + 1e-9:
+            self._apply(self.pending.pop(0))
+        manager = self.system.manager
+        while self.due and (self.due[0].at or 0.0) <= now + 1e-9:
+            expectation = self.due.pop(0)
+            for part, wanted in expectation.modes.items():
+                actual = manager.actual(part)
+                self._judge(expectation, holds(actual, wanted), f"at {expectation.at:g} s {part} is {actual}"
+                            + ("" if holds(actual, wanted) else f", expected {wanted}"))
+        for expectation in self.scenario.expectations:
+            for part, unwanted in expectation.never.items():
+                if (expectation.line, part) not in self._broken and holds(manager.actual(part), unwanted):
+                    self._broken.add((expectation.line, part))
+                    self.failures.append(f"{self._where(expectation)}: at {now:.2f} s {part} is "
+                                         f"{manager.actual(part)}, which must never be")
+
+    def end(self, status: str, now: float) -> None:
+        for expectation in self.due:  # never reached: the run ended before
+            self.failures.append(f"{self._where(expectation)}: the run ended at {now:.2f} s, "
+                                 f"before {expectation.at:g} s")
+        for expectation in self.scenario.expectations:
+            if expectation.tree is not None:
+                self._judge(expectation, status == expectation.tree, f"the tree ended {status}"
+                            + ("" if status == expectation.tree else f", expected {expectation.tree}"))
+            elif expectation.never:
+                broken = {part for line, part in self._broken if line == expectation.line}
+                if not broken:
+                    self.passed.append(f"{self._where(expectation)}: never {self._describe(expectation.never)}")
+
+    def _judge(self, expectation: Expectation, ok: bool, text: str) -> None:
+        (self.passed if ok else self.failures).append(f"{self._where(expectation)}: {text}")
+
+    def _where(self, expectation: Expectation) -> str:
+        return f"{self.scenario.path}:{expectation.line}"
+
+    @staticmethod
+    def _describe(modes: dict[str, StateMode]) -> str:
+        return ", ".join(f"{part} {mode}" for part, mode in modes.items())
+
+    def _apply(self, event: Event) -> None:
+        try:
+            self._carry_out(event)
+        except (ValueError, KeyError) as error:  # e.g. crashing a node that is not running
+            self.failures.append(f"{self.scenario.path}:{event.line}: the {event.kind} at {event.at:g} s could not "
+                                 f"be made: {error}")
+
+    def _carry_out(self, event: Event) -> None:
+        system, args = self.system, event.args
+        if event.kind in _NODE_EVENTS:
+            getattr(system, event.kind)(args["node"])
+        elif event.kind in _NODE_TRANSITION_EVENTS:
+            transition: Transition = args["transition"]
+            getattr(system, event.kind)(args["node"], transition)
+        elif event.kind == "reject_parameters":
+            system.reject_parameters(args["node"], args["reason"])
+        elif event.kind == "set_parameter":
+            system.set_parameter(args["node"], args["name"], args["value"])
+        else:
+            for part, wanted in args["modes"].items():
+                system.manager.change_mode(part, wanted.mode or "", requester="operator")
