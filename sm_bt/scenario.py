@@ -38,6 +38,9 @@ _NODE_EVENTS = ("crash", "vanish", "restart")
 _NODE_TRANSITION_EVENTS = ("fail_next", "hang_next")
 EVENTS = (*_NODE_EVENTS, *_NODE_TRANSITION_EVENTS, "reject_parameters", "set_parameter", "request")
 _TREE_ENDS = ("SUCCESS", "FAILURE", "RUNNING")
+#: What a scenario may name for ``sm-bt test`` to run it with: files relative to the scenario's
+#: own (the model also as a bundled name), and the run's length in seconds.
+SETUP = ("model", "tree", "stubs", "until")
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,29 @@ class Scenario:
     path: str
     events: tuple[Event, ...]
     expectations: tuple[Expectation, ...]
+
+
+def scenario_setup(path: str | os.PathLike[str]) -> tuple[dict[str, str], list[TreeIssue]]:
+    """What the scenario at ``path`` names to be run with (:data:`SETUP`: file paths made relative
+    to the working folder), and what is wrong with that."""
+    name = str(path)
+    try:
+        document = yaml.compose(Path(path).read_text(encoding="utf-8"), Loader=yaml.SafeLoader)
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return {}, []  # load_scenario says what is wrong with the file
+    setup: dict[str, str] = {}
+    issues: list[TreeIssue] = []
+    for key, value in document.value if isinstance(document, yaml.MappingNode) else ():
+        if key.value in SETUP:
+            if not isinstance(value, yaml.ScalarNode):
+                issues.append(TreeIssue(name, value.start_mark.line + 1, f"{key.value} is a file's name or a number"))
+                continue
+            text = str(value.value)
+            relative = Path(path).parent / text
+            if key.value in ("tree", "stubs") or (key.value == "model" and relative.exists()):
+                text = str(relative)
+            setup[key.value] = text
+    return setup, issues
 
 
 def load_scenario(path: str | os.PathLike[str], model: Model) -> tuple[Scenario, list[TreeIssue]]:
@@ -104,9 +130,10 @@ class _Reader:
             elif key.value == "expect":
                 expectations = [expected for node in self._list(value)
                                 if (expected := self._expectation(node)) is not None]
-            else:
-                self.wrong(key, f"no section {key.value!r}{did_you_mean(str(key.value), ('events', 'expect'))} "
-                                "(sections: events, expect)")
+            elif key.value not in SETUP:
+                sections = ("events", "expect", *SETUP)
+                self.wrong(key, f"no section {key.value!r}{did_you_mean(str(key.value), sections)} "
+                                f"(sections: {', '.join(sections)})")
         return Scenario(self.path, tuple(sorted(events, key=lambda e: e.at)), tuple(expectations))
 
     def _list(self, node: yaml.Node) -> list[yaml.Node]:

@@ -1,7 +1,7 @@
 """``sm-bt``: the table of commands, the parser built from it, and :func:`main`.
 
 Each command lives in a module of its own in this package (``check``, ``modes``, ``demo``,
-``monitor``, ``view``, ``manager``, ``mission``, ``run``, ``sim_nodes``, ``remote``) with an
+``monitor``, ``view``, ``manager``, ``mission``, ``run``, ``test``, ``sim_nodes``, ``remote``) with an
 ``add_arguments(parser)`` and a ``run(args)`` that returns the exit code; what commands share is
 in :mod:`sm_bt.cli.common` (the program's name, :class:`~sm_bt.cli.common.CliError`, loading a
 model by path or bundled name) and
@@ -18,7 +18,7 @@ import argparse
 import os
 import sys
 
-from sm_bt.cli import check, demo, manager, mission, modes, monitor, remote, run, sim_nodes, view
+from sm_bt.cli import check, demo, manager, mission, modes, monitor, remote, run, sim_nodes, test, view
 from sm_bt.cli.common import PROG, CliError, Command, UsageError
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.types import DEFAULT_MODE
@@ -41,6 +41,11 @@ COMMANDS: list[Command] = [
                         "Nav2's control nodes, and nodes declared in <TreeNodesModel> or only named, which run as "
                         "stand-ins doing what --stubs says. Narrates what the manager does; exit 0 when the tree "
                         "succeeds (or still runs at --until), 1 when it fails or a file has mistakes."),
+    Command("test", "run scenarios (faults and expectations) and judge them, for a team's CI", test.add_arguments,
+            test.run,
+            description="Run each SCENARIO with the model, tree and stubs it names, on simulated nodes as fast as "
+                        "possible; one line per scenario and each failed expectation, a tally, --junit FILE for CI. "
+                        "Exit 1 if a scenario failed."),
     Command("monitor", "show target and actual state/mode of every part as it changes",
             monitor.add_arguments, monitor.run,
             description="The mode monitor: part, target state, actual state, target mode, actual mode; systems "

@@ -136,18 +136,21 @@ def _wait_for_interrupt() -> None:
         pass
 
 
-def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace,
-          checks: Checks | None) -> int:
-    """Tick until the root ends (or ``--until``), narrating and applying the scenario; the exit code."""
+def ticked(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, *, rate: float, speed: float,
+           until: float | None, checks: Checks | None, narrate: bool) -> Status:
+    """Tick until the root ends (or ``until``), applying the scenario's ``checks`` after each tick;
+    with ``narrate``, the manager's lines and the root's status on stderr, on the run's time. The
+    root's last status."""
     clock = system.clock
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(_RunTime(clock.now))
     watched = [logging.getLogger("sm_bt.manager"), log]
+    levels = [logger.level for logger in watched]
     for logger in watched:
         logger.addHandler(handler)
-        logger.setLevel(logging.WARNING if args.quiet else logging.INFO)
+        logger.setLevel(logging.INFO if narrate else logging.CRITICAL)
         logger.propagate = False
-    period = 1.0 / args.rate
+    period = 1.0 / rate
     shown: Status | None = None
     try:
         while True:
@@ -158,20 +161,29 @@ def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: arg
             if status != shown:
                 log.info("%s %s", tree.root.name, status.value)
                 shown = status
-            if status in (Status.SUCCESS, Status.FAILURE) or (args.until is not None and clock.now() >= args.until):
-                break
+            if status in (Status.SUCCESS, Status.FAILURE) or (until is not None and clock.now() >= until):
+                return status
             system.run(period)
-            if args.speed > 0:
-                time.sleep(period / args.speed)
+            if speed > 0:
+                time.sleep(period / speed)
     finally:
-        for logger in watched:
+        for logger, level in zip(watched, levels, strict=True):
             logger.removeHandler(handler)
+            logger.setLevel(level)
             logger.propagate = True
-    stopped = f" (stopped at --until {args.until:g} s)" if tree.root.status == Status.RUNNING else ""
-    print(f"{args.tree}: {tree.root.status.value} at {clock.now():.2f} s{stopped}")
+
+
+def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace,
+          checks: Checks | None) -> int:
+    """The run, then its summary on stdout; the exit code."""
+    status = ticked(system, tree, rate=args.rate, speed=args.speed, until=args.until, checks=checks,
+                    narrate=not args.quiet)
+    now = system.clock.now()
+    stopped = f" (stopped at --until {args.until:g} s)" if status == Status.RUNNING else ""
+    print(f"{args.tree}: {status.value} at {now:.2f} s{stopped}")
     if checks is None:
-        return 1 if tree.root.status == Status.FAILURE else 0
-    checks.end(str(tree.root.status.value), clock.now())
+        return 1 if status == Status.FAILURE else 0
+    checks.end(str(status.value), now)
     held, failed = len(checks.passed), len(checks.failures)
     print(f"{args.scenario}: {held} of {held + failed} expectations held")
     for failure in checks.failures:
