@@ -91,7 +91,7 @@ extras: 1
         f"{path}:9: error: tree ends as one of SUCCESS, FAILURE, RUNNING, not 'DONE'",
         f"{path}:10: error: an expectation is {{at: SECONDS, modes: {{PART: STATE[.MODE]}}}}, {{never: {{PART: "
         "STATE[.MODE]}} or {tree: SUCCESS|FAILURE|RUNNING}",
-        f"{path}:11: error: no section 'extras' (sections: events, expect)",
+        f"{path}:11: error: no section 'extras' (sections: events, expect, model, tree, stubs, until)",
         f"{path}: failed (9 errors)"]
 
 
