@@ -45,7 +45,9 @@ from ros_processes import ManagerProcess, Starter
 
 import sm_bt
 from sm_bt.cli.app import build_parser
+from sm_bt.scenario import load_scenario, scenario_setup
 from sm_bt.trees.mission_xml import check_tree
+from sm_bt.trees.stubs import load_stubs
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
@@ -61,7 +63,8 @@ KINDS: dict[str, list[tuple[str, re.Pattern[str]]]] = {
                ("compile", re.compile(r"compile \(.+\)")), ("pytest", re.compile(r"pytest")),
                ("py_trees_ros", re.compile(r"py_trees_ros \(.+\)"))],
     "yaml": [("model", re.compile(r"")), ("file", re.compile(r"file (\S+)")),
-             ("part", re.compile(r"part of (\S+)"))],
+             ("part", re.compile(r"part of (\S+)")), ("stubs", re.compile(r"stubs file (\S+)")),
+             ("scenario", re.compile(r"scenario file (\S+)"))],
     "xml": [("tree", re.compile(r"file (\S+), checked against (\S+)")),
             ("dds profile", re.compile(r"fast dds profile, the one (\S+) uses"))],
     "sh": [("commands", re.compile(r"")), ("skip", re.compile(r"skip \(.+\)"))],
@@ -235,6 +238,21 @@ def test_yaml_examples_are_the_files_they_show_and_load(block: Block) -> None:
     (path,) = block.kind[1]
     assert (ROOT / path).read_text(encoding="utf-8") == block.text, f"{block} differs from {path}"
     sm_bt.load_model(ROOT / path)
+
+
+@by_line(of_kind("stubs"))
+def test_stubs_examples_are_the_files_they_show_and_read_clean(block: Block) -> None:
+    (path,) = block.kind[1]
+    assert (ROOT / path).read_text(encoding="utf-8") == block.text, f"{block} differs from {path}"
+    assert load_stubs(ROOT / path)[1] == []
+
+
+@by_line(of_kind("scenario"))
+def test_scenario_examples_are_the_files_they_show_and_read_clean_against_their_model(block: Block) -> None:
+    (path,) = block.kind[1]
+    assert (ROOT / path).read_text(encoding="utf-8") == block.text, f"{block} differs from {path}"
+    setup, issues = scenario_setup(ROOT / path)
+    assert issues == [] and load_scenario(ROOT / path, sm_bt.load_model(sm_bt.models.path(setup["model"])))[1] == []
 
 
 @by_line(of_kind("part"))
