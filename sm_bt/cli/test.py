@@ -4,7 +4,8 @@ A scenario file names what it runs (``model: pilot``, ``tree: mission.xml``, ``s
 stubs.yaml``, relative to the scenario's own file; ``until: SECONDS``, default 600) besides its
 ``events`` and ``expect`` (:mod:`sm_bt.scenario`). Each runs on simulated nodes as fast as
 possible; one line per scenario, each failed expectation below it, then a tally, as pytest prints
-them. ``--junit FILE`` writes JUnit XML for a team's CI. Exit 0 when every scenario passed.
+them. ``--junit FILE`` writes JUnit XML for a team's CI; the recording of a failed scenario's run is
+kept in ``--runs DIR`` for ``sm-bt view``. Exit 0 when every scenario passed.
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ UNTIL = 600.0
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenarios", nargs="+", metavar="SCENARIO", help="scenario files (YAML)")
     parser.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML to FILE")
+    parser.add_argument("--runs", metavar="DIR", default="sm-bt-test-runs",
+                        help="where the recording of each failed scenario is kept, for sm-bt view "
+                             "(default ./sm-bt-test-runs)")
 
 
 @dataclass
@@ -38,6 +42,7 @@ class Outcome:
     held: int = 0
     seconds: float = 0.0  # wall time
     summary: str = ""
+    recording: str = ""  # kept when it failed
 
     @property
     def passed(self) -> bool:
@@ -46,11 +51,13 @@ class Outcome:
 
 def run(args: argparse.Namespace) -> int:
     began = time.monotonic()
-    outcomes = [_one(path) for path in args.scenarios]
+    outcomes = [_one(path, Path(args.runs)) for path in args.scenarios]
     for outcome in outcomes:
         print(f"{'PASSED' if outcome.passed else 'FAILED'} {outcome.path}: {outcome.summary}")
         for failure in outcome.failures:
             print(f"  {failure}")
+        if outcome.recording:
+            print(f"  the run: sm-bt view {outcome.recording}")
     passed = sum(outcome.passed for outcome in outcomes)
     failed = len(outcomes) - passed
     print(f"{passed} passed, {failed} failed in {time.monotonic() - began:.2f} s")
@@ -59,12 +66,13 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def _one(path: str) -> Outcome:
+def _one(path: str, runs: Path) -> Outcome:
     from sm_bt.cli.run import ticked
     from sm_bt.scenario import Checks, load_scenario, scenario_setup
     from sm_bt.sim import SimulatedSystem
     from sm_bt.trees.mission_xml import TreeFileError, load_tree
     from sm_bt.trees.stubs import load_stubs
+    from sm_bt.view import attach_view
 
     outcome = Outcome(path)
     began = time.monotonic()
@@ -94,11 +102,21 @@ def _one(path: str) -> Outcome:
             outcome.failures, outcome.summary = [str(issue) for issue in error.issues], "cannot run it"
             return outcome
         checks = Checks(scenario, system)
-        with contextlib.redirect_stderr(io.StringIO()):
-            status = ticked(system, system.tree(root), rate=10.0, speed=0.0, until=until, checks=checks,
-                            narrate=False)
+        tree = system.tree(root)
+        runs.mkdir(parents=True, exist_ok=True)
+        recording = runs / (Path(path).stem + ".jsonl")
+        view = attach_view(tree, system.manager, port=None, record=recording)
+        try:
+            with contextlib.redirect_stderr(io.StringIO()):
+                status = ticked(system, tree, rate=10.0, speed=0.0, until=until, checks=checks, narrate=False)
+        finally:
+            view.close()
         checks.end(str(status.value), system.clock.now())
         outcome.failures, outcome.held = list(checks.failures), len(checks.passed)
+        if outcome.failures:
+            outcome.recording = str(recording)
+        else:
+            recording.unlink(missing_ok=True)
         outcome.summary = (f"{outcome.held} of {outcome.held + len(outcome.failures)} expectations held; the tree "
                            f"{status.value} at {system.clock.now():.2f} s")
     outcome.seconds = time.monotonic() - began
