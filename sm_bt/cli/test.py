@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import shutil
+import tempfile
 import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -103,20 +105,19 @@ def _one(path: str, runs: Path) -> Outcome:
             return outcome
         checks = Checks(scenario, system)
         tree = system.tree(root)
-        runs.mkdir(parents=True, exist_ok=True)
-        recording = runs / (Path(path).stem + ".jsonl")
-        view = attach_view(tree, system.manager, port=None, record=recording)
-        try:
-            with contextlib.redirect_stderr(io.StringIO()):
-                status = ticked(system, tree, rate=10.0, speed=0.0, until=until, checks=checks, narrate=False)
-        finally:
-            view.close()
-        checks.end(str(status.value), system.clock.now())
-        outcome.failures, outcome.held = list(checks.failures), len(checks.passed)
-        if outcome.failures:
-            outcome.recording = str(recording)
-        else:
-            recording.unlink(missing_ok=True)
+        with tempfile.TemporaryDirectory(prefix="sm-bt-test-") as scratch:
+            recording = Path(scratch) / (Path(path).stem + ".jsonl")
+            view = attach_view(tree, system.manager, port=None, record=recording)
+            try:
+                with contextlib.redirect_stderr(io.StringIO()):
+                    status = ticked(system, tree, rate=10.0, speed=0.0, until=until, checks=checks, narrate=False)
+            finally:
+                view.close()
+            checks.end(str(status.value), system.clock.now())
+            outcome.failures, outcome.held = list(checks.failures), len(checks.passed)
+            if outcome.failures:  # kept; a passed scenario's run leaves nothing behind
+                runs.mkdir(parents=True, exist_ok=True)
+                outcome.recording = str(shutil.move(recording, runs / recording.name))
         outcome.summary = (f"{outcome.held} of {outcome.held + len(outcome.failures)} expectations held; the tree "
                            f"{status.value} at {system.clock.now():.2f} s")
     outcome.seconds = time.monotonic() - began
