@@ -18,6 +18,14 @@ def non_negative(text: str) -> float:
     return value
 
 
+def positive(text: str) -> float:
+    """A finite number (a rate, seconds) more than 0."""
+    value = non_negative(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be more than 0")
+    return value
+
+
 def positive_int(text: str) -> int:
     try:
         value = int(text)

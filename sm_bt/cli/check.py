@@ -22,7 +22,7 @@ from functools import partial
 from pathlib import Path
 from typing import TypeVar
 
-from sm_bt.cli.common import CliError, add_lenient, bundled_names, load_or_report, plural, print_issues
+from sm_bt.cli.common import CliError, add_lenient, bundled_names, load_or_report, plural, print_issues, report_failed
 from sm_bt.model.types import Model, Severity
 from sm_bt.trees.stubs import Stub
 
@@ -140,10 +140,8 @@ def _stubs(path: str) -> dict[str, Stub] | None:
     from sm_bt.trees.stubs import load_stubs
 
     stubs, issues = load_stubs(path)
-    for issue in issues:
-        print(issue, file=sys.stderr)
     if issues:
-        print(f"{path}: failed ({plural(len(issues), 'error')})", file=sys.stderr)
+        report_failed(path, issues)
         return None
     return stubs
 

@@ -101,6 +101,14 @@ def print_issues(issues: Sequence[ModelIssue], stream: TextIO) -> None:
         print(issue, file=stream)
 
 
+def report_failed(name: str, issues: Sequence[object]) -> int:
+    """Print each of a file's mistakes, then ``NAME: failed (N errors)``, on stderr; 1, the exit code."""
+    for issue in issues:
+        print(issue, file=sys.stderr)
+    print(f"{name}: failed ({plural(len(issues), 'error')})", file=sys.stderr)
+    return 1
+
+
 def load_or_report(name: str, *, strict: bool) -> Model | None:
     """The model, or ``None`` after printing why it failed to stderr."""
     try:

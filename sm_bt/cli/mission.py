@@ -21,18 +21,11 @@ import logging
 import signal
 from typing import Any
 
-from sm_bt.cli.arguments import non_negative
+from sm_bt.cli.arguments import non_negative, positive
 from sm_bt.cli.common import CliError, load
 from sm_bt.model.errors import ModelError
 
 log = logging.getLogger("sm_bt.ros.host")
-
-
-def _positive(text: str) -> float:
-    value = float(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be more than 0 ticks per second, not {text}")
-    return value
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="model file, or a bundled model's name (or the ROS parameter model)")
     parser.add_argument("tree", nargs="?", metavar="TREE",
                         help="a .xml tree file or package.module:function (or the ROS parameter tree)")
-    parser.add_argument("--rate", type=_positive, default=None, metavar="HZ",
+    parser.add_argument("--rate", type=positive, default=None, metavar="HZ",
                         help="ticks per second (default 10, or the ROS parameter rate)")
     parser.add_argument("--wait-for-nodes", type=non_negative, default=None, metavar="SECONDS",
                         help="wait this long for the model's nodes before the first tick (default 10; 0: do not "

@@ -22,8 +22,8 @@ from collections.abc import Callable
 import py_trees
 from py_trees.common import Status
 
-from sm_bt.cli.arguments import non_negative, port
-from sm_bt.cli.common import CliError, load_or_report
+from sm_bt.cli.arguments import non_negative, port, positive
+from sm_bt.cli.common import CliError, load_or_report, report_failed
 from sm_bt.scenario import Checks, load_scenario
 from sm_bt.sim import SimulatedSystem
 from sm_bt.trees.mission_xml import TreeFileError, load_tree
@@ -33,23 +33,16 @@ from sm_bt.trees.stubs import Stub, load_stubs
 log = logging.getLogger("sm_bt.run")
 
 
-def _positive(text: str) -> float:
-    value = float(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be more than 0, not {text}")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="MODEL", help="model file, or a bundled model's name")
     parser.add_argument("tree", metavar="TREE.xml", help="a mission tree in XML (BehaviorTree.CPP/Groot style)")
     parser.add_argument("--stubs", metavar="FILE", help="what the declared or unknown nodes do (YAML or JSON: "
                                                         "ID: {status: running, for: SECONDS, then: success})")
-    parser.add_argument("--rate", type=_positive, default=10.0, metavar="HZ",
+    parser.add_argument("--rate", type=positive, default=10.0, metavar="HZ",
                         help="ticks per second of the run's (virtual) time (default 10)")
     parser.add_argument("--speed", type=non_negative, default=10.0,
                         help="virtual seconds per wall second; 0 runs as fast as possible (default 10)")
-    parser.add_argument("--until", type=_positive, default=None, metavar="SECONDS",
+    parser.add_argument("--until", type=positive, default=None, metavar="SECONDS",
                         help="stop after this many seconds of the run, if the tree has not ended")
     parser.add_argument("--scenario", metavar="FILE",
                         help="faults on a timeline and what must hold (YAML: events, expect); exit 1 if an "
@@ -83,26 +76,17 @@ def run(args: argparse.Namespace) -> int:
     if args.stubs:
         stubs, issues = load_stubs(args.stubs)
         if issues:
-            for issue in issues:
-                print(issue, file=sys.stderr)
-            print(f"{args.stubs}: failed ({len(issues)} error{'s' if len(issues) != 1 else ''})", file=sys.stderr)
-            return 1
+            return report_failed(args.stubs, issues)
     scenario = None
     if args.scenario:
         scenario, issues = load_scenario(args.scenario, model)
         if issues:
-            for issue in issues:
-                print(issue, file=sys.stderr)
-            print(f"{args.scenario}: failed ({len(issues)} error{'s' if len(issues) != 1 else ''})", file=sys.stderr)
-            return 1
+            return report_failed(args.scenario, issues)
     with SimulatedSystem(model, record=False) as system:
         try:
             root = load_tree(args.tree, manager=system.manager, stubs=stubs)
         except TreeFileError as error:
-            print(error, file=sys.stderr)
-            print(f"{args.tree}: failed ({len(error.issues)} error{'s' if len(error.issues) != 1 else ''})",
-                  file=sys.stderr)
-            return 1
+            return report_failed(args.tree, error.issues)
         tree = system.tree(root)
         view = None
         if args.view is not None or args.record:
