@@ -115,8 +115,10 @@ def test_a_change_the_manager_fails_ends_the_wait_at_once_with_its_reason(
     code, out, err = sm_bt(capsys, "mode", "set", "pilot", "f_normal_mode", "--wait", "--timeout", "30")
     took = time.monotonic() - started
     assert (code, out) == (1, "")
+    # Where the pilot is then: no mode, or unknown while its nodes are still in their 3 s configuring
+    # (which one depends on when the manager last heard of them; a fresh-clone run saw the second).
     assert re.fullmatch(r"sm-bt: error: the manager says request #\d+ change_mode pilot f_normal_mode failed: .*"
-                        r"timed out.*: pilot is in mode '\(none\)', not 'f_normal_mode'\n", err), err
+                        r"timed out.*: pilot is in mode '(\(none\)|unknown)', not 'f_normal_mode'\n", err), err
     assert took < 15.0, f"the wait ended {took:.1f} s after the request, at its timeout rather than the failure"
     assert manager.lines("change_mode pilot f_normal_mode", "failed")
 
