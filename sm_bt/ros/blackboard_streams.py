@@ -19,14 +19,14 @@ thread; a lock keeps the streams consistent between them.
 from __future__ import annotations
 
 import logging
-import threading
 import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
 import py_trees
 
-from sm_bt.ros import blackboard_activity, removable
+from sm_bt.ros import removable
+from sm_bt.ros.tree_streams import TreeStreams
 
 log = logging.getLogger("sm_bt.ros.blackboard_streams")
 
@@ -46,21 +46,14 @@ class _Stream:
     readers: int = 0  # subscriptions matched when it was sent
 
 
-class BlackboardStreams:
+class BlackboardStreams(TreeStreams[_Stream]):
     """Serve blackboard streams of ``tree``'s blackboard on ``node`` until :meth:`close`."""
 
     def __init__(self, node: Any, tree: py_trees.trees.BehaviourTree) -> None:
         from py_trees_ros_interfaces.srv import CloseBlackboardStream, GetBlackboardVariables, OpenBlackboardStream
 
-        self._node = node
-        self._tree = tree
-        self._lock = threading.Lock()
-        self._streams: dict[str, _Stream] = {}
-        self._counter = 0
-        self._visitor = py_trees.visitors.SnapshotVisitor()
-        tree.add_visitor(self._visitor)
-        tree.add_pre_tick_handler(self._before_tick)
-        tree.add_post_tick_handler(self._after_tick)
+        self._visitor: py_trees.visitors.SnapshotVisitor = py_trees.visitors.SnapshotVisitor()
+        super().__init__(node, tree, self._visitor)
         self._services = [
             node.create_service(GetBlackboardVariables, "~/blackboard_streams/get_variables", self._variables),
             node.create_service(OpenBlackboardStream, "~/blackboard_streams/open", self._open),
@@ -109,13 +102,10 @@ class BlackboardStreams:
             log.info("blackboard stream closed: %s", request.topic_name)
         return response
 
-    def _update_activity(self) -> None:
-        blackboard_activity.want(self, any(stream.with_activity for stream in self._streams.values()))
+    def _wants_activity(self, stream: _Stream) -> bool:
+        return stream.with_activity
 
     # -- ticks (the ticking thread) ------------------------------------------------------------------
-
-    def _before_tick(self, tree: py_trees.trees.BehaviourTree) -> None:
-        blackboard_activity.clear_for_tick()
 
     def _after_tick(self, tree: py_trees.trees.BehaviourTree) -> None:
         with self._lock:
@@ -148,23 +138,6 @@ class BlackboardStreams:
             keys = Blackboard.keys_filtered_by_clients(client_ids=visited)
             names = {name for name in names if name.split(".")[0] in keys}
         return sorted(names)
-
-    def close(self) -> None:
-        """Remove the services and streams and stop publishing (the tree keeps running)."""
-        with self._lock:
-            for stream in self._streams.values():
-                self._node.destroy_publisher(stream.publisher)
-            self._streams.clear()
-            self._update_activity()
-            for service in self._services:
-                self._node.destroy_service(service)
-            self._services.clear()
-        for handlers, handler in ((self._tree.pre_tick_handlers, self._before_tick),
-                                  (self._tree.post_tick_handlers, self._after_tick)):
-            if handler in handlers:
-                handlers.remove(handler)
-        if self._visitor in self._tree.visitors:
-            self._tree.visitors.remove(self._visitor)
 
 
 def variable_names() -> list[str]:

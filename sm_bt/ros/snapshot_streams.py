@@ -21,7 +21,6 @@ from __future__ import annotations
 import logging
 import math
 import statistics
-import threading
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -31,7 +30,8 @@ import py_trees
 from py_trees.common import BlackBoxLevel, Status
 
 from sm_bt.behaviours.visitors import FeedbackSnapshotVisitor
-from sm_bt.ros import blackboard_activity, removable
+from sm_bt.ros import removable
+from sm_bt.ros.tree_streams import TreeStreams
 from sm_bt.tree_snapshot import BehaviourView, behaviours, blackboard_values
 
 log = logging.getLogger("sm_bt.ros.snapshot_streams")
@@ -66,22 +66,15 @@ class _Statistics:
     durations: list[float] = field(default_factory=list)
 
 
-class SnapshotStreams:
+class SnapshotStreams(TreeStreams[_Stream]):
     """Serve snapshot streams of ``tree`` on ``node`` until :meth:`close`."""
 
     def __init__(self, node: Any, tree: py_trees.trees.BehaviourTree) -> None:
         from py_trees_ros_interfaces.srv import CloseSnapshotStream, OpenSnapshotStream, ReconfigureSnapshotStream
 
-        self._node = node
-        self._tree = tree
-        self._lock = threading.Lock()
-        self._streams: dict[str, _Stream] = {}
-        self._counter = 0
+        self._visitor: FeedbackSnapshotVisitor = FeedbackSnapshotVisitor()
+        super().__init__(node, tree, self._visitor)
         self._statistics = _Statistics()
-        self._visitor = FeedbackSnapshotVisitor()
-        tree.add_visitor(self._visitor)
-        tree.add_pre_tick_handler(self._before_tick)
-        tree.add_post_tick_handler(self._after_tick)
         self._services = [
             node.create_service(OpenSnapshotStream, "~/snapshot_streams/open", self._open),
             node.create_service(CloseSnapshotStream, "~/snapshot_streams/close", self._close),
@@ -153,13 +146,13 @@ class SnapshotStreams:
         stream.blackboard_activity = bool(parameters.blackboard_activity)
         self._update_activity()
 
-    def _update_activity(self) -> None:
-        blackboard_activity.want(self, any(stream.blackboard_activity for stream in self._streams.values()))
+    def _wants_activity(self, stream: _Stream) -> bool:
+        return stream.blackboard_activity
 
     # -- ticks (the ticking thread) ------------------------------------------------------------------
 
     def _before_tick(self, tree: py_trees.trees.BehaviourTree) -> None:
-        blackboard_activity.clear_for_tick()
+        super()._before_tick(tree)
         now = time.monotonic()
         stats = self._statistics
         if stats.started:
@@ -223,23 +216,6 @@ class SnapshotStreams:
                 setattr(message, f"{name}_average", float(statistics.fmean(values)))
                 setattr(message, f"{name}_variance", float(statistics.pvariance(values)))
         return message
-
-    def close(self) -> None:
-        """Remove the services and streams and stop publishing (the tree keeps running)."""
-        with self._lock:
-            for stream in self._streams.values():
-                self._node.destroy_publisher(stream.publisher)
-            self._streams.clear()
-            self._update_activity()
-            for service in self._services:
-                self._node.destroy_service(service)
-            self._services.clear()
-        for handlers, handler in ((self._tree.pre_tick_handlers, self._before_tick),
-                                  (self._tree.post_tick_handlers, self._after_tick)):
-            if handler in handlers:
-                handlers.remove(handler)
-        if self._visitor in self._tree.visitors:
-            self._tree.visitors.remove(self._visitor)
 
 
 def _text(value: object) -> str:
