@@ -44,3 +44,15 @@ def port(text: str) -> int:
     if not 0 <= port <= 65535:
         raise argparse.ArgumentTypeError(f"port {port} is not between 0 and 65535")
     return port
+
+
+def add_view_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--view [PORT]``, ``--host`` and ``--record``: a run's live view and its recording."""
+    parser.add_argument("--view", type=port, nargs="?", const=8765, default=None, metavar="PORT",
+                        help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "
+                             "(default port 8765; 0: any free port); it stays until Ctrl-C after the run")
+    parser.add_argument("--host", default="127.0.0.1", metavar="HOST",
+                        help="with --view: the address it listens on (default 127.0.0.1: this machine only), "
+                             "as `sm-bt view --host`")
+    parser.add_argument("--record", metavar="FILE.jsonl",
+                        help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")

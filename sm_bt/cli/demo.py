@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sm_bt.cli.arguments import non_negative, port, positive_int
+from sm_bt.cli.arguments import add_view_arguments, non_negative, positive_int
 from sm_bt.cli.common import CliError, UsageError
 from sm_bt.trees.mission_xml import TreeFileError
 from sm_bt.trees.pilot.demo import DEGRADED_FOR, REPAIR_AT, TREES, Auto, Demo, Options
@@ -32,14 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="world (virtual) seconds per wall second; 0 runs as fast as possible, "
                              "simulated only (default 35)")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
-    parser.add_argument("--view", type=port, nargs="?", const=8765, default=None, metavar="PORT",
-                        help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "
-                             "(default port 8765; 0: any free port); it stays until Ctrl-C after the run")
-    parser.add_argument("--host", default="127.0.0.1", metavar="HOST",
-                        help="with --view: the address it listens on (default 127.0.0.1: this machine only), "
-                             "as `sm-bt view --host`")
-    parser.add_argument("--record", metavar="FILE.jsonl",
-                        help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")
+    add_view_arguments(parser)
     parser.add_argument("--ros", action="store_true",
                         help="run on real ROS 2 lifecycle nodes (sm-bt sim-nodes pilot, started "
                              "and stopped by the demo) with the manager on ROS 2, serving the system_modes "

@@ -22,7 +22,7 @@ from collections.abc import Callable
 import py_trees
 from py_trees.common import Status
 
-from sm_bt.cli.arguments import non_negative, port, positive
+from sm_bt.cli.arguments import add_view_arguments, non_negative, positive
 from sm_bt.cli.common import CliError, load_or_report, report_failed
 from sm_bt.scenario import Checks, load_scenario
 from sm_bt.sim import SimulatedSystem
@@ -48,13 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="faults on a timeline and what must hold (YAML: events, expect); exit 1 if an "
                              "expectation fails")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
-    parser.add_argument("--view", type=port, nargs="?", const=8765, default=None, metavar="PORT",
-                        help="serve a live view of the tree, the modes and the run at http://127.0.0.1:PORT/ "
-                             "(default port 8765; 0: any free port); it stays until Ctrl-C after the run")
-    parser.add_argument("--host", default="127.0.0.1", metavar="HOST",
-                        help="with --view: the address it listens on (default 127.0.0.1: this machine only)")
-    parser.add_argument("--record", metavar="FILE.jsonl",
-                        help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")
+    add_view_arguments(parser)
 
 
 class _RunTime(logging.Formatter):
@@ -103,21 +97,11 @@ def run(args: argparse.Namespace) -> int:
             checks = Checks(scenario, system) if scenario is not None else None
             code = _tick(system, tree, args, checks)
             if view is not None and view.url:
-                view.finish()
-                print(f"run over; the view stays at {view.url} until Ctrl-C", file=sys.stderr, flush=True)
-                _wait_for_interrupt()
+                view.stay(lambda line: print(line, file=sys.stderr, flush=True))
             return code
         finally:
             if view is not None:
                 view.close()
-
-
-def _wait_for_interrupt() -> None:
-    try:
-        while True:
-            time.sleep(3600)
-    except KeyboardInterrupt:
-        pass
 
 
 def ticked(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, *, rate: float, speed: float,

@@ -15,6 +15,9 @@ run is about 0.5 MB, and making them costs a tree a few microseconds a tick.
 
 from __future__ import annotations
 
+import contextlib
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import py_trees
@@ -43,6 +46,15 @@ class View:
         finish = getattr(self.server, "finish", None)
         if finish is not None:
             finish()
+
+    def stay(self, say: Callable[[str], None]) -> None:
+        """The run is over (:meth:`finish`): ``say`` so with the address, then serve the page until
+        Ctrl-C."""
+        self.finish()
+        say(f"run over; the view stays at {self.url} until Ctrl-C")
+        with contextlib.suppress(KeyboardInterrupt):
+            while True:
+                time.sleep(3600)
 
     def close(self) -> None:
         self.maker.close()

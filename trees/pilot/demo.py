@@ -19,7 +19,6 @@ faster (:attr:`World.time_scale <sm_bt.trees.pilot.world.World.time_scale>`).
 
 from __future__ import annotations
 
-import contextlib
 import enum
 import threading
 import time
@@ -387,11 +386,7 @@ class Demo:
         self.show()
         code = self.summary(time.monotonic() - started)
         if self.view is not None and self.view.url and self.options.linger:
-            self.view.finish()  # the page says the run is over
-            self._always(f"run over; the view stays at {self.view.url} until Ctrl-C")
-            with contextlib.suppress(KeyboardInterrupt):
-                while True:
-                    time.sleep(3600)
+            self.view.stay(self._always)
         return code
 
     def expected_mode(self) -> str:
