@@ -44,8 +44,10 @@ POLL = 0.5
 NODE_SERVICES = frozenset({"get_state", "change_state"})
 #: How long to look for the manager of a node that does not answer, to say which of the two is out of reach.
 PEEK = 2.0
-#: Seconds the graph may take to show the rest of a manager's services once one of them shows.
-GRAPH_SETTLE = 1.0
+#: Seconds a fresh process's graph may take to show a manager's services at all (1-3 s in about
+#: half of the runs measured, docs/cli.md): a node with no manager waits this long before its
+#: transition is sent; a managed node or a system is told at once.
+GRAPH_SETTLE = 3.5
 
 
 class ManagerUnreachable(Error, RuntimeError):
