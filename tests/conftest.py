@@ -28,6 +28,9 @@ sm_bt.ros.environment.prepare(own_domain=True)
 if os.environ.get("PYTEST_XDIST_WORKER", "").startswith("gw"):
     os.environ["ROS_DOMAIN_ID"] = str(worker_domain_id(int(os.environ["ROS_DOMAIN_ID"]),
                                                         int(os.environ["PYTEST_XDIST_WORKER"][2:])))
+# `sm-bt mode`/`state` would start a client daemon that outlives the test: tests that want one start
+# it themselves, by pid (tests/ros/test_client_daemon.py).
+os.environ["SM_BT_DAEMON"] = "0"
 
 # A run started where SIGINT is ignored (a background job of a non-interactive shell) would hand
 # that on to every process it starts, and a test that stops one with SIGINT would wait in vain

@@ -1,7 +1,7 @@
 """``sm-bt``: the table of commands, the parser built from it, and :func:`main`.
 
 Each command lives in a module of its own in this package (``check``, ``modes``, ``demo``,
-``monitor``, ``view``, ``manager``, ``mission``, ``run``, ``test``, ``sim_nodes``, ``remote``) with an
+``monitor``, ``view``, ``daemon``, ``manager``, ``mission``, ``run``, ``test``, ``sim_nodes``, ``remote``) with an
 ``add_arguments(parser)`` and a ``run(args)`` that returns the exit code; what commands share is
 in :mod:`sm_bt.cli.common` (the program's name, :class:`~sm_bt.cli.common.CliError`, loading a
 model by path or bundled name) and
@@ -18,7 +18,7 @@ import argparse
 import os
 import sys
 
-from sm_bt.cli import check, demo, manager, mission, modes, monitor, remote, run, sim_nodes, test, view
+from sm_bt.cli import check, daemon, demo, manager, mission, modes, monitor, remote, run, sim_nodes, test, view
 from sm_bt.cli.common import PROG, CliError, Command, UsageError
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.types import DEFAULT_MODE
@@ -65,6 +65,11 @@ COMMANDS: list[Command] = [
             remote.add_state_arguments, remote.run_state,
             description="`state get PART`, `state set PART TRANSITION [--wait]`: a system's through the manager, a "
                         "node's through its own lifecycle service."),
+    Command("daemon", "start, stop or ask the client daemon that sm-bt mode and state call through",
+            daemon.add_arguments, daemon.run,
+            description="The client daemon keeps watching the ROS graph, so that `sm-bt mode` and `sm-bt state` "
+                        "find a known manager at once instead of discovering it in every new process (up to "
+                        "seconds). Those commands start it when none runs; SM_BT_DAEMON=0 turns that off."),
     Command("manager", "run the mode manager as a ROS 2 node (drop-in for system_modes' mode_manager)",
             manager.add_arguments, manager.run,
             description="Serve /{system}/change_state, get_state, get_available_states and /{part}/change_mode, "

@@ -17,6 +17,7 @@ manager answers; 2 a part, mode or transition that is not served (with the close
 from __future__ import annotations
 
 import argparse
+import contextlib
 from contextlib import AbstractContextManager
 from typing import Any
 
@@ -77,14 +78,26 @@ def add_state_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _client(args: argparse.Namespace) -> AbstractContextManager[Any]:
+    """The client daemon's when one runs (it knows the graph already); else a client of this
+    process's own, and a daemon started for the next command (unless ``SM_BT_DAEMON=0``)."""
+    from sm_bt.ros import client_daemon
     from sm_bt.ros.environment import RosUnavailable
 
+    if client_daemon.enabled():
+        try:
+            return client_daemon.DaemonClient(args.timeout)
+        except client_daemon.DaemonUnavailable:
+            pass
     try:
         from sm_bt.ros.client import ModeClient
 
-        return ModeClient(timeout=args.timeout)
+        own = ModeClient(timeout=args.timeout)
     except (RosUnavailable, ImportError) as error:
         raise CliError(str(error)) from None
+    if client_daemon.enabled():
+        with contextlib.suppress(OSError):
+            client_daemon.start_detached()
+    return own
 
 
 def _translated(args: argparse.Namespace, action: Any) -> int:

@@ -15,8 +15,9 @@ reference's ``mode_manager`` alike:
 
 Every call has a timeout. Names that nobody serves raise :class:`UnknownName` with the names that
 are served ("did you mean ...?"); no answer at all raises :class:`ManagerUnreachable`, saying what
-to check. One rclpy context and node of its own, spun only inside its calls; :meth:`close` ends
-them.
+to check. One rclpy node of its own, in a context of its own or one it is given (the client
+daemon's, :mod:`sm_bt.ros.client_daemon`, whose graph is already known), spun only inside its calls;
+:meth:`close` ends them.
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ PEEK = 2.0
 #: half of the runs measured, docs/cli.md): a node with no manager waits this long before its
 #: transition is sent; a managed node or a system is told at once.
 GRAPH_SETTLE = 3.5
+#: A graph watched this long has shown every service there is (the client daemon's): no settling.
+GRAPH_WARM = 10.0
 
 
 class ManagerUnreachable(Error, RuntimeError):
@@ -71,17 +74,25 @@ def _closest(word: str, served: list[str], what: str) -> str:
 class ModeClient:
     """Ask a mode manager over ROS 2; every method waits at most ``timeout`` seconds."""
 
-    def __init__(self, timeout: float = 10.0, node_name: str = "sm_bt_client") -> None:
-        prepare(local_only=False)  # the user's discovery settings: the manager may be on another host
-        require_ros()
+    def __init__(self, timeout: float = 10.0, node_name: str = "sm_bt_client", context: Any = None,
+                 graph_since: float | None = None) -> None:
+        """``context``: an rclpy context to make the node in, which :meth:`close` leaves running;
+        ``graph_since``: when that context started watching the graph (``time.monotonic()``)."""
+        if context is None:
+            prepare(local_only=False)  # the user's discovery settings: the manager may be on another host
+            require_ros()
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
 
         self.timeout = timeout
-        self.context = Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self._owns_context = context is None
+        if context is None:
+            context = Context()
+            rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+        self.context = context
+        self.graph_since = time.monotonic() if graph_since is None else graph_since
         self.node = rclpy.create_node(node_name, context=self.context, start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -92,7 +103,8 @@ class ModeClient:
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
-        self.context.try_shutdown()
+        if self._owns_context:
+            self.context.try_shutdown()
 
     def __enter__(self) -> ModeClient:
         return self
@@ -161,12 +173,13 @@ class ModeClient:
     def managed_node(self, part: str) -> bool:
         """Is ``part`` a node (its own ``change_state`` server) that a mode manager manages (one
         serves the part's ``get_mode``)? Looked up once ``change_state`` is found (which the call
-        needs anyway), the graph given :data:`GRAPH_SETTLE` s more to show who serves what."""
+        needs anyway), a young graph given :data:`GRAPH_SETTLE` s more to show who serves what."""
         from lifecycle_msgs.srv import ChangeState
 
         if not self._found(self._client(ChangeState, f"/{part}/change_state"), part):
             return False  # the call that follows says what answers not
-        give_up = time.monotonic() + GRAPH_SETTLE
+        young = time.monotonic() - self.graph_since < GRAPH_WARM
+        give_up = time.monotonic() + (GRAPH_SETTLE if young else 0.0)
         while True:
             server = self._server_of(f"/{part}/change_state")
             if server is not None and server != f"/{part}":
