@@ -1,4 +1,4 @@
-"""Scenarios: faults on a timeline and what must hold, for a mission run on simulated nodes.
+"""Scenarios: faults on a timeline and what must hold, for a mission run on simulated or ROS 2 nodes.
 
 A scenario file (YAML) has ``events`` (each at a time of the run, in seconds) and ``expect``::
 
@@ -23,15 +23,17 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
+import py_trees
 import yaml
 
+from sm_bt.engine.clock import Clock
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition, transition_by_label
+from sm_bt.engine.manager import ModeManager
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import Model, NodePart
-from sm_bt.sim import SimulatedSystem
+from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.trees.tree_documents import TreeIssue
 
 _NODE_EVENTS = ("crash", "vanish", "restart")
@@ -41,6 +43,37 @@ _TREE_ENDS = ("SUCCESS", "FAILURE", "RUNNING")
 #: What a scenario may name for ``sm-bt test`` to run it with: files relative to the scenario's
 #: own (the model also as a bundled name), and the run's length in seconds.
 SETUP = ("model", "tree", "stubs", "until")
+
+
+class MissionSystem(Protocol):
+    """What a run ticks a mission against and a scenario's events act on: simulated nodes
+    (:class:`~sm_bt.sim.SimulatedSystem`, virtual time) or ROS 2 nodes
+    (:class:`~sm_bt.ros.mission_system.RosSystem`, real time)."""
+
+    manager: ModeManager
+
+    @property
+    def clock(self) -> Clock: ...
+
+    def run(self, seconds: float) -> None:
+        """Let ``seconds`` of the run's time pass."""
+
+    def tree(self, root: py_trees.behaviour.Behaviour) -> py_trees.trees.BehaviourTree:
+        """A tree around ``root``, set up with the manager and the clock."""
+
+    def crash(self, node: str) -> None: ...
+
+    def vanish(self, node: str) -> None: ...
+
+    def restart(self, node: str) -> None: ...
+
+    def fail_next(self, node: str, transition: Transition) -> None: ...
+
+    def hang_next(self, node: str, transition: Transition) -> None: ...
+
+    def reject_parameters(self, node: str, reason: str | None) -> None: ...
+
+    def set_parameter(self, node: str, name: str, value: ParamValue) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -67,6 +100,10 @@ class Scenario:
     path: str
     events: tuple[Event, ...]
     expectations: tuple[Expectation, ...]
+
+    def own_processes(self) -> set[str]:
+        """The nodes whose process the events crash, end or restart: on ROS each runs alone."""
+        return {event.args["node"] for event in self.events if event.kind in _NODE_EVENTS}
 
 
 def scenario_setup(path: str | os.PathLike[str]) -> tuple[dict[str, str], list[TreeIssue]]:
@@ -271,7 +308,7 @@ class Checks:
     due), :meth:`end` with the tree's final status; ``failures`` says what did not hold, with the
     scenario's line."""
 
-    def __init__(self, scenario: Scenario, system: SimulatedSystem) -> None:
+    def __init__(self, scenario: Scenario, system: MissionSystem) -> None:
         self.scenario = scenario
         self.system = system
         self.pending = list(scenario.events)

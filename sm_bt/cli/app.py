@@ -36,11 +36,13 @@ COMMANDS: list[Command] = [
             description="The pilot mission tree (patrol, laser failure, degraded mode, low battery, recharge) on the "
                         "embedded simulated backend, or with --ros on real rclpy lifecycle nodes in a child process "
                         "managed over ROS 2."),
-    Command("run", "run any model with any mission tree (XML) on simulated nodes", run.add_arguments, run.run,
-            description="Tick TREE.xml against MODEL on simulated nodes: sm_bt's behaviours, BehaviorTree.CPP's and "
-                        "Nav2's control nodes, and nodes declared in <TreeNodesModel> or only named, which run as "
-                        "stand-ins doing what --stubs says. Narrates what the manager does; exit 0 when the tree "
-                        "succeeds (or still runs at --until), 1 when it fails or a file has mistakes."),
+    Command("run", "run any model with any mission tree (XML) on simulated nodes or ROS 2", run.add_arguments,
+            run.run,
+            description="Tick TREE.xml against MODEL on simulated nodes (--ros: on ROS 2, in real time): sm_bt's "
+                        "behaviours, BehaviorTree.CPP's and Nav2's control nodes, and nodes declared in "
+                        "<TreeNodesModel> or only named, which run as stand-ins doing what --stubs says. Narrates "
+                        "what the manager does; exit 0 when the tree succeeds (or still runs at --until), 1 when it "
+                        "fails or a file has mistakes."),
     Command("test", "run scenarios (faults and expectations) and judge them, for a team's CI", test.add_arguments,
             test.run,
             description="Run each SCENARIO with the model, tree and stubs it names, on simulated nodes as fast as "

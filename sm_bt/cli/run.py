@@ -1,4 +1,4 @@
-"""``sm-bt run MODEL TREE.xml``: any model with any mission tree, on simulated nodes.
+"""``sm-bt run MODEL TREE.xml``: any model with any mission tree, on simulated nodes or on ROS 2.
 
 The tree is ticked at ``--rate`` ticks per (virtual) second, ``--speed`` virtual seconds per wall
 second (0: as fast as possible). Nodes the tree declares in ``<TreeNodesModel>`` or only names run
@@ -8,23 +8,27 @@ lines, stamped with the run's time) and each change of the root's status; it end
 ends, or at ``--until`` seconds, and exits 0 on SUCCESS (or still running at ``--until``), 1 on
 FAILURE or when the model, the tree or the stubs have mistakes (all of them said, with lines).
 With ``--scenario FILE`` (:mod:`sm_bt.scenario`) its faults happen at their times, its
-expectations are judged, and the exit status is theirs: 1 when one failed.
+expectations are judged, and the exit status is theirs: 1 when one failed. With ``--ros`` the
+model's nodes are simulated rclpy lifecycle nodes in child processes (``--attach``: the real nodes,
+already running) and the run is in real time (:class:`~sm_bt.ros.mission_system.RosSystem`).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import py_trees
 from py_trees.common import Status
 
 from sm_bt.cli.arguments import add_view_arguments, non_negative, positive
-from sm_bt.cli.common import CliError, load_or_report, report_failed
-from sm_bt.scenario import Checks, load_scenario
+from sm_bt.cli.common import CliError, UsageError, load_or_report, report_failed
+from sm_bt.model.types import Model
+from sm_bt.scenario import Checks, MissionSystem, Scenario, load_scenario
 from sm_bt.sim import SimulatedSystem
 from sm_bt.trees.mission_xml import TreeFileError, load_tree
 from sm_bt.trees.stubs import Stub, load_stubs
@@ -40,15 +44,52 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                         "ID: {status: running, for: SECONDS, then: success})")
     parser.add_argument("--rate", type=positive, default=10.0, metavar="HZ",
                         help="ticks per second of the run's (virtual) time (default 10)")
-    parser.add_argument("--speed", type=non_negative, default=10.0,
-                        help="virtual seconds per wall second; 0 runs as fast as possible (default 10)")
+    parser.add_argument("--speed", type=non_negative, default=None,
+                        help="virtual seconds per wall second; 0 runs as fast as possible (default 10; with --ros "
+                             "the run is in real time)")
     parser.add_argument("--until", type=positive, default=None, metavar="SECONDS",
                         help="stop after this many seconds of the run, if the tree has not ended")
     parser.add_argument("--scenario", metavar="FILE",
                         help="faults on a timeline and what must hold (YAML: events, expect); exit 1 if an "
                              "expectation fails")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
+    add_ros_arguments(parser)
     add_view_arguments(parser)
+
+
+def add_ros_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--ros`` and ``--attach``: the run on ROS 2 (``sm-bt run``, ``sm-bt test``)."""
+    parser.add_argument("--ros", action="store_true",
+                        help="run on ROS 2 in real time: the model's nodes as simulated rclpy lifecycle nodes in "
+                             "child processes (sm-bt sim-nodes), the manager embedded, serving the system_modes "
+                             "interface meanwhile; needs the ros extra")
+    parser.add_argument("--attach", action="store_true",
+                        help="with --ros: manage the model's real nodes, already running in this shell's "
+                             "ROS_DOMAIN_ID, instead of starting simulated ones (faults other than set_parameter "
+                             "need simulated nodes)")
+
+
+@contextlib.contextmanager
+def mission_system(model: Model, model_name: str, *, ros: bool, attach: bool, scenario: Scenario | None,
+                   say: Callable[[str], None]) -> Iterator[MissionSystem]:
+    """Simulated nodes, or with ``ros`` the model's nodes on ROS 2 (those the scenario crashes,
+    ends or restarts each in a process of its own); :class:`CliError` when ROS cannot start them."""
+    if not ros:
+        with SimulatedSystem(model, record=False) as simulated:
+            yield simulated
+        return
+    from sm_bt.ros.environment import RosUnavailable
+    from sm_bt.ros.node_process import NodesError
+
+    try:
+        from sm_bt.ros.mission_system import RosSystem
+
+        system = RosSystem(model, model_name, attach=attach,
+                           separate=scenario.own_processes() if scenario is not None else (), say=say)
+    except (RosUnavailable, NodesError, ImportError) as error:
+        raise CliError(str(error)) from None
+    with system:
+        yield system
 
 
 class _RunTime(logging.Formatter):
@@ -63,6 +104,7 @@ class _RunTime(logging.Formatter):
 
 
 def run(args: argparse.Namespace) -> int:
+    speed = _speed(args)
     model = load_or_report(args.model, strict=True)
     if model is None:
         return 1
@@ -76,7 +118,12 @@ def run(args: argparse.Namespace) -> int:
         scenario, issues = load_scenario(args.scenario, model)
         if issues:
             return report_failed(args.scenario, issues)
-    with SimulatedSystem(model, record=False) as system:
+
+    def say(line: str) -> None:
+        if not args.quiet:
+            print(line, file=sys.stderr, flush=True)
+
+    with mission_system(model, args.model, ros=args.ros, attach=args.attach, scenario=scenario, say=say) as system:
         try:
             root = load_tree(args.tree, manager=system.manager, stubs=stubs)
         except TreeFileError as error:
@@ -95,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"view: {view.url}", file=sys.stderr, flush=True)
         try:
             checks = Checks(scenario, system) if scenario is not None else None
-            code = _tick(system, tree, args, checks)
+            code = _tick(system, tree, args, speed, checks)
             if view is not None and view.url:
                 view.stay(lambda line: print(line, file=sys.stderr, flush=True))
             return code
@@ -104,7 +151,20 @@ def run(args: argparse.Namespace) -> int:
                 view.close()
 
 
-def ticked(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, *, rate: float, speed: float,
+def _speed(args: argparse.Namespace) -> float:
+    """The run's --speed: 10 by default; with --ros the run is in real time (ticks are not paced
+    on top of the time that passes)."""
+    if args.attach and not args.ros:
+        raise UsageError("--attach goes with --ros (it manages real nodes over ROS 2)")
+    if not args.ros:
+        return 10.0 if args.speed is None else float(args.speed)
+    if args.speed is not None and args.speed != 1:
+        raise UsageError("--speed is for simulated nodes: with --ros the run is in real time (the nodes' "
+                         "transitions and the manager's timeouts take real seconds)")
+    return 0.0
+
+
+def ticked(system: MissionSystem, tree: py_trees.trees.BehaviourTree, *, rate: float, speed: float,
            until: float | None, checks: Checks | None, narrate: bool) -> Status:
     """Tick until the root ends (or ``until``), applying the scenario's ``checks`` after each tick;
     with ``narrate``, the manager's lines and the root's status on stderr, on the run's time. The
@@ -141,10 +201,10 @@ def ticked(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, *, rate:
             logger.propagate = True
 
 
-def _tick(system: SimulatedSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace,
+def _tick(system: MissionSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace, speed: float,
           checks: Checks | None) -> int:
     """The run, then its summary on stdout; the exit code."""
-    status = ticked(system, tree, rate=args.rate, speed=args.speed, until=args.until, checks=checks,
+    status = ticked(system, tree, rate=args.rate, speed=speed, until=args.until, checks=checks,
                     narrate=not args.quiet)
     now = system.clock.now()
     stopped = f" (stopped at --until {args.until:g} s)" if status == Status.RUNNING else ""

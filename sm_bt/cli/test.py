@@ -3,7 +3,8 @@
 A scenario file names what it runs (``model: pilot``, ``tree: mission.xml``, ``stubs:
 stubs.yaml``, relative to the scenario's own file; ``until: SECONDS``, default 600) besides its
 ``events`` and ``expect`` (:mod:`sm_bt.scenario`). Each runs on simulated nodes as fast as
-possible; one line per scenario, each failed expectation below it, then a tally, as pytest prints
+possible, or with ``--ros`` on ROS 2 in real time (``sm-bt run --ros``); one line per scenario,
+each failed expectation below it, then a tally, as pytest prints
 them. ``--junit FILE`` writes JUnit XML for a team's CI; the recording of a failed scenario's run is
 kept in ``--runs DIR`` for ``sm-bt view``. Exit 0 when every scenario passed.
 """
@@ -20,7 +21,8 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sm_bt.cli.common import CliError, load
+from sm_bt.cli.common import CliError, UsageError, load
+from sm_bt.cli.run import add_ros_arguments
 from sm_bt.model.errors import ModelError
 
 #: How long a scenario runs at most when it does not say (seconds of the run).
@@ -33,6 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", metavar="DIR", default="sm-bt-test-runs",
                         help="where the recording of each failed scenario is kept, for sm-bt view "
                              "(default ./sm-bt-test-runs)")
+    add_ros_arguments(parser)
 
 
 @dataclass
@@ -52,8 +55,10 @@ class Outcome:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.attach and not args.ros:
+        raise UsageError("--attach goes with --ros (it manages real nodes over ROS 2)")
     began = time.monotonic()
-    outcomes = [_one(path, Path(args.runs)) for path in args.scenarios]
+    outcomes = [_one(path, Path(args.runs), ros=args.ros, attach=args.attach) for path in args.scenarios]
     for outcome in outcomes:
         print(f"{'PASSED' if outcome.passed else 'FAILED'} {outcome.path}: {outcome.summary}")
         for failure in outcome.failures:
@@ -68,10 +73,9 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def _one(path: str, runs: Path) -> Outcome:
-    from sm_bt.cli.run import ticked
+def _one(path: str, runs: Path, *, ros: bool = False, attach: bool = False) -> Outcome:
+    from sm_bt.cli.run import mission_system, ticked
     from sm_bt.scenario import Checks, load_scenario, scenario_setup
-    from sm_bt.sim import SimulatedSystem
     from sm_bt.trees.mission_xml import TreeFileError, load_tree
     from sm_bt.trees.stubs import load_stubs
     from sm_bt.view import attach_view
@@ -97,7 +101,8 @@ def _one(path: str, runs: Path) -> Outcome:
         outcome.summary = "cannot run it"
         return outcome
     until = float(setup.get("until", UNTIL))
-    with SimulatedSystem(model, record=False) as system:
+    with mission_system(model, setup["model"], ros=ros, attach=attach, scenario=scenario,
+                        say=lambda line: None) as system:
         try:
             root = load_tree(setup["tree"], manager=system.manager, stubs=stubs)
         except TreeFileError as error:

@@ -13,6 +13,10 @@ with ``set_parameters`` and gets a confirmation:
     (configure, cleanup, activate, deactivate, shutdown) returns FAILURE (back to its start state);
     ``"<transition>:error"`` returns ERROR (errorprocessing, then ``on_error`` SUCCESS: unconfigured).
     Used once: the parameter reads ``""`` again afterwards.
+``sim.hang_next`` (string, "")
+    ``"<transition>"``: the next requested transition with that label enters its transition state
+    and never leaves it: its callback waits until the process stops, so the node answers no
+    transition meanwhile (nor anything else, with ``--single-threaded``). Used once.
 ``sim.reject_parameters`` (string, "")
     non-empty: every parameter set that touches a parameter outside ``sim.`` is rejected, with this
     text as the reason. ``sim.*`` sets are always accepted.
@@ -54,6 +58,7 @@ from sm_bt.ros import environment
 PREFIX = "sim."
 TRANSITION_DELAY = "sim.transition_delay"
 FAIL_NEXT = "sim.fail_next"
+HANG_NEXT = "sim.hang_next"
 REJECT_PARAMETERS = "sim.reject_parameters"
 BROKEN = "sim.broken"
 
@@ -123,10 +128,13 @@ def _rejection(node: Node, parameters: Sequence[Parameter]) -> str | None:
 class SimulatedNode(LifecycleNode):
     """A model node as an rclpy lifecycle node, with the ``sim.*`` fault parameters (module doc)."""
 
-    def __init__(self, part: NodePart, *, context: Context | None = None, transition_delay: float = 0.0) -> None:
+    def __init__(self, part: NodePart, *, context: Context | None = None, transition_delay: float = 0.0,
+                 stop: threading.Event | None = None) -> None:
         namespace, name = split_name(part.name)
         super().__init__(name, namespace=namespace, context=context)
         self.part = part
+        #: What ends a hung transition (sim.hang_next): the process's stop.
+        self._stop = stop if stop is not None else threading.Event()
         # Inherited unannotated rclpy methods, called on the subclass: outside untyped_calls_exclude.
         self._log = self.get_logger()  # type: ignore[no-untyped-call]
         # True while the node runs a deactivate it started itself (sim.broken): not a requested
@@ -137,6 +145,8 @@ class SimulatedNode(LifecycleNode):
             description="seconds every transition callback takes"))
         self.declare_parameter(FAIL_NEXT, "", ParameterDescriptor(
             description="'<transition>[:failure|:error]': the next requested one fails; used once"))
+        self.declare_parameter(HANG_NEXT, "", ParameterDescriptor(
+            description="'<transition>': the next requested one never ends; used once"))
         self.declare_parameter(REJECT_PARAMETERS, "", ParameterDescriptor(
             description="non-empty: reject sets of non-sim parameters with this reason"))
         self.declare_parameter(BROKEN, False, ParameterDescriptor(
@@ -192,6 +202,11 @@ class SimulatedNode(LifecycleNode):
         self._delay()
         if self._failing:
             return TransitionCallbackReturn.ERROR
+        if str(self.get_parameter(HANG_NEXT).value) == label:
+            self.set_parameters([Parameter(HANG_NEXT, value="")])
+            self._log.warning(f"{HANG_NEXT}: {label} hangs until the process stops")
+            self._stop.wait()
+            return TransitionCallbackReturn.ERROR
         planned = parse_fail_next(str(self.get_parameter(FAIL_NEXT).value))
         if planned is None or planned[0] != label:
             return _SUCCESS
@@ -212,6 +227,9 @@ class SimulatedNode(LifecycleNode):
                     parse_fail_next(str(parameter.value))
                 except ValueError as error:
                     return SetParametersResult(successful=False, reason=str(error))
+            elif parameter.name == HANG_NEXT and parameter.value not in ("", *REQUESTABLE):
+                reason = f"{HANG_NEXT} must be '' or one of {', '.join(REQUESTABLE)}; got {parameter.value!r}"
+                return SetParametersResult(successful=False, reason=reason)
             elif parameter.name == TRANSITION_DELAY and not 0.0 <= float(parameter.value) < math.inf:
                 return SetParametersResult(
                     successful=False, reason=f"{TRANSITION_DELAY} must be a finite number of seconds >= 0")
@@ -345,7 +363,7 @@ def run_nodes(
     failure: list[BaseException] = []
     try:
         try:
-            lifecycle = [SimulatedNode(part, context=context, transition_delay=transition_delay)
+            lifecycle = [SimulatedNode(part, context=context, transition_delay=transition_delay, stop=stop)
                          for part in lifecycle_parts]
             nodes.extend(lifecycle)
             nodes.extend(SimulatedParameterNode(part, context=context) for part in plain_parts)

@@ -21,6 +21,7 @@ from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from ros_processes import (
     RosContext,
     Starter,
+    call,
     node_processes_fixture,  # noqa: F401  (the node_processes fixture)
     ros_context_fixture,  # noqa: F401  (the ros_context fixture)
     wait_until,
@@ -184,6 +185,23 @@ def test_fail_next_fails_one_requested_transition_with_failure_or_error(
     assert change(ros_context, node, label="configure")  # nothing pending any more
     assert change(ros_context, node, label="activate")
     assert state(ros_context, node) == "active"
+
+
+def test_hang_next_leaves_one_transition_unanswered_until_the_process_stops(
+    ros_context: RosContext, node_processes: Starter
+) -> None:
+    node = "/amcl"
+    process = node_processes("pilot", "--only", "amcl")
+    rejected = set_parameters(ros_context, node, {"sim.hang_next": "explode"})
+    assert not rejected.successful and "configure" in rejected.reason
+    assert set_parameters(ros_context, node, {"sim.hang_next": "configure"}).successful
+    time.sleep(0.3)  # the answer's path to this client (see RosContext.call): the request goes once
+    request = ChangeState.Request()
+    request.transition.label = "configure"
+    with pytest.raises(AssertionError, match=r"no response within 1\.5 s"):
+        call(ros_context.client(ChangeState, f"{node}/change_state"), request, timeout=1.5)
+    # Hung, not dead: the process ends at once when asked to (its stop releases the callback).
+    assert process.stop() == 0
 
 
 def test_transition_delay_makes_transitions_take_time_without_holding_up_other_nodes(
