@@ -9,6 +9,7 @@ A scenario file (YAML) has ``events`` (each at a time of the run, in seconds) an
       - {at: 8.0, reject_parameters: {node: controller_server, reason: busy}}   # reason: null clears
       - {at: 9.0, set_parameter: {node: controller_server, name: max_vel, value: 0.2}}
       - {at: 10, request: {pilot: f_degraded_mode}}  # a mode asked from outside (an operator)
+      - {at: 15, world: {laser: broken}}             # an event of the scenario's world (below)
     expect:
       - {at: 3.0, modes: {pilot: active.f_normal_mode, amcl: active}}   # what holds then
       - {never: {laser_resender: finalized}}         # at no tick of the run
@@ -16,11 +17,17 @@ A scenario file (YAML) has ``events`` (each at a time of the run, in seconds) an
 
 :func:`load_scenario` reads it against a model, every mistake with its line; :class:`Checks`
 applies the events and judges the expectations as a run goes (``sm-bt run --scenario``).
+
+A tree whose own actions drive a simulated robot (the pilot's) needs that robot's world: the
+scenario names it, ``world: MODULE:NAME`` (``NAME()`` makes a :class:`SimulatedWorld`), and its
+events are ``{at: SECONDS, world: {NAME: VALUE}}``.
 """
 
 from __future__ import annotations
 
+import importlib
 import os
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -38,11 +45,11 @@ from sm_bt.trees.tree_documents import TreeIssue
 
 _NODE_EVENTS = ("crash", "vanish", "restart")
 _NODE_TRANSITION_EVENTS = ("fail_next", "hang_next")
-EVENTS = (*_NODE_EVENTS, *_NODE_TRANSITION_EVENTS, "reject_parameters", "set_parameter", "request")
+EVENTS = (*_NODE_EVENTS, *_NODE_TRANSITION_EVENTS, "reject_parameters", "set_parameter", "request", "world")
 _TREE_ENDS = ("SUCCESS", "FAILURE", "RUNNING")
 #: What a scenario may name for ``sm-bt test`` to run it with: files relative to the scenario's
 #: own (the model also as a bundled name), and the run's length in seconds.
-SETUP = ("model", "tree", "stubs", "until")
+SETUP = ("model", "tree", "stubs", "until", "world")
 
 
 class MissionSystem(Protocol):
@@ -58,8 +65,8 @@ class MissionSystem(Protocol):
     def run(self, seconds: float) -> None:
         """Let ``seconds`` of the run's time pass."""
 
-    def tree(self, root: py_trees.behaviour.Behaviour) -> py_trees.trees.BehaviourTree:
-        """A tree around ``root``, set up with the manager and the clock."""
+    def tree(self, root: py_trees.behaviour.Behaviour, **setup: Any) -> py_trees.trees.BehaviourTree:
+        """A tree around ``root``, set up with the manager, the clock and ``setup``."""
 
     def crash(self, node: str) -> None: ...
 
@@ -74,6 +81,39 @@ class MissionSystem(Protocol):
     def reject_parameters(self, node: str, reason: str | None) -> None: ...
 
     def set_parameter(self, node: str, name: str, value: ParamValue) -> None: ...
+
+
+class SimulatedWorld(Protocol):
+    """What a tree's own actions act on, beside the nodes (the pilot's robot, battery and laser)."""
+
+    #: The world's events and the values each takes: ``{"laser": ("broken", "repaired")}``.
+    events: Mapping[str, tuple[str, ...]]
+
+    def attach(self, system: MissionSystem) -> dict[str, Any]:
+        """Couple the world to the run's system; the runtime objects the tree's setup gets."""
+
+    def advance(self) -> None:
+        """Called after each step of the run's time."""
+
+    def event(self, name: str, value: str) -> None:
+        """Make one of :attr:`events` happen; ``ValueError`` when it cannot be made now."""
+
+
+def load_world(reference: str) -> SimulatedWorld:
+    """``NAME()`` of the module ``MODULE`` for ``"MODULE:NAME"``; ``ValueError`` saying what is wrong."""
+    module_name, _, name = reference.partition(":")
+    if not module_name or not name:
+        raise ValueError(f"world {reference!r} is not MODULE:NAME (e.g. sm_bt.trees.pilot.world:PilotWorld)")
+    try:
+        factory = getattr(importlib.import_module(module_name), name)
+    except ImportError as error:
+        raise ValueError(f"world {reference!r}: cannot import {module_name} ({error})") from None
+    except AttributeError:
+        raise ValueError(f"world {reference!r}: {module_name} has no {name}") from None
+    world = factory()
+    if not all(hasattr(world, member) for member in ("events", "attach", "advance", "event")):
+        raise ValueError(f"world {reference!r} is not a world (events, attach, advance, event)")
+    return world  # type: ignore[no-any-return]
 
 
 @dataclass(frozen=True)
@@ -122,23 +162,26 @@ def scenario_setup(path: str | os.PathLike[str]) -> tuple[dict[str, str], list[T
                 issues.append(TreeIssue(name, value.start_mark.line + 1, f"{key.value} is a file's name or a number"))
                 continue
             text = str(value.value)
-            relative = Path(path).parent / text
-            if key.value in ("tree", "stubs") or (key.value == "model" and relative.exists()):
-                text = str(relative)
+            relative = os.path.normpath(Path(path).parent / text)
+            if key.value in ("tree", "stubs") or (key.value == "model" and os.path.exists(relative)):
+                text = relative
             setup[key.value] = text
     return setup, issues
 
 
-def load_scenario(path: str | os.PathLike[str], model: Model) -> tuple[Scenario, list[TreeIssue]]:
-    """The scenario of the file at ``path``, read against ``model``, and every mistake in it."""
-    reader = _Reader(str(path), model)
+def load_scenario(path: str | os.PathLike[str], model: Model,
+                  world_events: Mapping[str, tuple[str, ...]] | None = None) -> tuple[Scenario, list[TreeIssue]]:
+    """The scenario of the file at ``path``, read against ``model`` (and the events of its
+    world, :attr:`SimulatedWorld.events`), and every mistake in it."""
+    reader = _Reader(str(path), model, world_events or {})
     return reader.read(), reader.issues
 
 
 class _Reader:
-    def __init__(self, path: str, model: Model) -> None:
+    def __init__(self, path: str, model: Model, world_events: Mapping[str, tuple[str, ...]]) -> None:
         self.path = path
         self.model = model
+        self.world_events = world_events
         self.issues: list[TreeIssue] = []
 
     def wrong(self, node: yaml.Node | None, message: str) -> None:
@@ -227,6 +270,8 @@ class _Reader:
         if kind == "request":
             wanted = self._modes(value, system_modes=True)
             return None if wanted is None else {"modes": wanted}
+        if kind == "world":
+            return self._world_event(value)
         fields = self._fields(value)
         if fields is None:
             return None
@@ -253,6 +298,28 @@ class _Reader:
         if "value" in fields:
             args["value"] = yaml.safe_load(yaml.serialize(fields["value"]))
         return args
+
+    def _world_event(self, node: yaml.Node) -> dict[str, Any] | None:
+        fields = self._fields(node)
+        if fields is None:
+            return None
+        if not self.world_events:
+            self.wrong(node, "a world event needs the scenario's world (world: MODULE:NAME)")
+            return None
+        if len(fields) != 1:
+            self.wrong(node, "a world event is {NAME: VALUE}, one at a time")
+            return None
+        (name, value), = fields.items()
+        if name not in self.world_events:
+            names = list(self.world_events)
+            self.wrong(node, f"the world has no event {name!r}{did_you_mean(name, names)} (events: {', '.join(names)})")
+            return None
+        values = self.world_events[name]
+        if str(value.value) not in values:
+            self.wrong(value, f"{name} is one of {', '.join(values)}, not {value.value!r}"
+                              f"{did_you_mean(str(value.value), values)}")
+            return None
+        return {"name": name, "value": str(value.value)}
 
     def _modes(self, node: yaml.Node, *, system_modes: bool = False) -> dict[str, StateMode] | None:
         fields = self._fields(node)
@@ -308,9 +375,16 @@ class Checks:
     due), :meth:`end` with the tree's final status; ``failures`` says what did not hold, with the
     scenario's line."""
 
-    def __init__(self, scenario: Scenario, system: MissionSystem) -> None:
+    def __init__(self, scenario: Scenario, system: MissionSystem, world: SimulatedWorld | None = None,
+                 on_failure: Callable[[str], None] | None = None) -> None:
         self.scenario = scenario
         self.system = system
+        self.world = world
+        #: Told each failure as it is found (the run's view lists it).
+        self.on_failure = on_failure
+        #: The run's time of the first failure (``sm-bt view --at``).
+        self.first_failure_at: float | None = None
+        self._now = 0.0
         self.pending = list(scenario.events)
         self.due = sorted((e for e in scenario.expectations if e.at is not None), key=lambda e: e.at or 0.0)
         self.failures: list[str] = []
@@ -318,6 +392,7 @@ class Checks:
         self._broken: set[tuple[int, str]] = set()
 
     def at(self, now: float) -> None:
+        self._now = now
         while self.pending and self.pending[0].at <= now + 1e-9:
             self._apply(self.pending.pop(0))
         manager = self.system.manager
@@ -331,13 +406,13 @@ class Checks:
             for part, unwanted in expectation.never.items():
                 if (expectation.line, part) not in self._broken and holds(manager.actual(part), unwanted):
                     self._broken.add((expectation.line, part))
-                    self.failures.append(f"{self._where(expectation)}: at {now:.2f} s {part} is "
-                                         f"{manager.actual(part)}, which must never be")
+                    self._fail(f"{self._where(expectation)}: at {now:.2f} s {part} is {manager.actual(part)}, "
+                               "which must never be")
 
     def end(self, status: str, now: float) -> None:
+        self._now = now
         for expectation in self.due:  # never reached: the run ended before
-            self.failures.append(f"{self._where(expectation)}: the run ended at {now:.2f} s, "
-                                 f"before {expectation.at:g} s")
+            self._fail(f"{self._where(expectation)}: the run ended at {now:.2f} s, before {expectation.at:g} s")
         for expectation in self.scenario.expectations:
             if expectation.tree is not None:
                 self._judge(expectation, status == expectation.tree, f"the tree ended {status}"
@@ -348,7 +423,17 @@ class Checks:
                     self.passed.append(f"{self._where(expectation)}: never {self._describe(expectation.never)}")
 
     def _judge(self, expectation: Expectation, ok: bool, text: str) -> None:
-        (self.passed if ok else self.failures).append(f"{self._where(expectation)}: {text}")
+        if ok:
+            self.passed.append(f"{self._where(expectation)}: {text}")
+        else:
+            self._fail(f"{self._where(expectation)}: {text}")
+
+    def _fail(self, text: str) -> None:
+        self.failures.append(text)
+        if self.first_failure_at is None:
+            self.first_failure_at = self._now
+        if self.on_failure is not None:
+            self.on_failure(text)
 
     def _where(self, expectation: Expectation) -> str:
         return f"{self.scenario.path}:{expectation.line}"
@@ -361,8 +446,8 @@ class Checks:
         try:
             self._carry_out(event)
         except (ValueError, KeyError) as error:  # e.g. crashing a node that is not running
-            self.failures.append(f"{self.scenario.path}:{event.line}: the {event.kind} at {event.at:g} s could not "
-                                 f"be made: {error}")
+            self._fail(f"{self.scenario.path}:{event.line}: the {event.kind} at {event.at:g} s could not be made: "
+                       f"{error}")
 
     def _carry_out(self, event: Event) -> None:
         system, args = self.system, event.args
@@ -375,6 +460,10 @@ class Checks:
             system.reject_parameters(args["node"], args["reason"])
         elif event.kind == "set_parameter":
             system.set_parameter(args["node"], args["name"], args["value"])
+        elif event.kind == "world":
+            if self.world is None:
+                raise ValueError("the run has no world")
+            self.world.event(args["name"], args["value"])
         else:
             for part, wanted in args["modes"].items():
                 system.manager.change_mode(part, wanted.mode or "", requester="operator")

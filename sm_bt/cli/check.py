@@ -7,7 +7,9 @@ status 1 if any file failed.
 
 A tree is checked against the model it names in a comment, ``<!-- sm_bt model: pilot -->`` (a
 bundled model's name, or a path relative to the tree file), else against ``--model``, else
-against every model given with it; each error says which model it is against.
+against every model given with it; each error says which model it is against. A scenario file
+(``events:``/``expect:``, :mod:`sm_bt.scenario`) is checked against the model it names, with its
+world, and the tree and stubs it names are checked too; a stubs file is checked alone.
 """
 
 from __future__ import annotations
@@ -67,13 +69,42 @@ def _expand(names: Sequence[str]) -> list[str]:
     return out
 
 
+def _kind(name: str) -> str:
+    """What a file is: "tree" (.xml), "scenario", "stubs" or "model", from its top-level keys."""
+    if name.endswith(".xml"):
+        return "tree"
+    import yaml
+
+    from sm_bt.scenario import SETUP
+
+    try:
+        document = yaml.safe_load(Path(name).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError, ValueError):
+        return "model"  # loading it as a model says what is wrong
+    if not isinstance(document, dict) or not document:
+        return "model"
+    if {"events", "expect"} & set(document) and set(document) <= {"events", "expect", *SETUP}:
+        return "scenario"
+    if all(isinstance(value, dict) and "status" in value for value in document.values()):
+        return "stubs"
+    return "model"
+
+
 def run(args: argparse.Namespace) -> int:
     names = _expand(args.models)
-    trees = [name for name in names if name.endswith(".xml")]
+    kinds = {name: _kind(name) for name in names}
+    trees = [name for name in names if kinds[name] == "tree"]
     models: list[tuple[str, Model]] = []
     failed = 0
     for name in names:
-        if name in trees:
+        if kinds[name] == "scenario":
+            failed += not _guarded(name, args.debug, partial(_check_scenario, name, args.lenient))
+        if kinds[name] == "stubs":
+            stubs_ok = _guarded(name, args.debug, partial(_stubs, name)) is not None
+            failed += not stubs_ok
+            if stubs_ok:
+                print(f"{name}: ok (stubs)")
+        if kinds[name] != "model":
             continue
         model = _guarded(name, args.debug, partial(load_or_report, name, strict=not args.lenient))
         if model is None:
@@ -144,6 +175,42 @@ def _stubs(path: str) -> dict[str, Stub] | None:
         report_failed(path, issues)
         return None
     return stubs
+
+
+def _check_scenario(path: str, lenient: bool) -> bool:
+    """Check a scenario against the model it names (with its world), and the tree and stubs it
+    names; print what was found."""
+    from sm_bt.scenario import load_scenario, load_world, scenario_setup
+
+    setup, setup_issues = scenario_setup(path)
+    if setup_issues or "model" not in setup:
+        report_failed(path, [*setup_issues, *([] if "model" in setup else
+                                              [f"{path}: name the model it runs with (model: ...)"])])
+        return False
+    model = load_or_report(setup["model"], strict=not lenient)
+    if model is None:
+        print(f"{path}: failed (its model {setup['model']} does not load)", file=sys.stderr)
+        return False
+    events = None
+    if "world" in setup:
+        try:
+            events = load_world(setup["world"]).events
+        except ValueError as error:
+            report_failed(path, [f"{path}: {error}"])
+            return False
+    scenario, issues = load_scenario(path, model, events)
+    ok = not issues
+    if issues:
+        report_failed(path, issues)
+    else:
+        print(f"{path}: ok (scenario: {plural(len(scenario.events), 'event')}, "
+              f"{plural(len(scenario.expectations), 'expectation')}, against {setup['model']})")
+    stubs = _stubs(setup["stubs"]) if "stubs" in setup else {}
+    if stubs is None:
+        return False
+    if "tree" in setup:
+        ok = _check_tree_file(setup["tree"], [(setup["model"], model)], stubs) and ok
+    return ok
 
 
 def _check_tree_file(tree: str, models: list[tuple[str, Model]], stubs: dict[str, Stub]) -> bool:

@@ -28,7 +28,7 @@ from py_trees.common import Status
 from sm_bt.cli.arguments import add_view_arguments, non_negative, positive
 from sm_bt.cli.common import CliError, UsageError, load_or_report, report_failed
 from sm_bt.model.types import Model
-from sm_bt.scenario import Checks, MissionSystem, Scenario, load_scenario
+from sm_bt.scenario import Checks, MissionSystem, Scenario, SimulatedWorld, load_scenario, load_world, scenario_setup
 from sm_bt.sim import SimulatedSystem
 from sm_bt.trees.mission_xml import TreeFileError, load_tree
 from sm_bt.trees.stubs import Stub, load_stubs
@@ -52,6 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", metavar="FILE",
                         help="faults on a timeline and what must hold (YAML: events, expect); exit 1 if an "
                              "expectation fails")
+    parser.add_argument("--world", metavar="MODULE:NAME",
+                        help="the simulated world the tree's own actions need (the pilot's: "
+                             "sm_bt.trees.pilot.world:PilotWorld); default: the scenario's world:")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
     add_ros_arguments(parser)
     add_view_arguments(parser)
@@ -113,9 +116,16 @@ def run(args: argparse.Namespace) -> int:
         stubs, issues = load_stubs(args.stubs)
         if issues:
             return report_failed(args.stubs, issues)
+    world: SimulatedWorld | None = None
+    reference = args.world or (scenario_setup(args.scenario)[0].get("world") if args.scenario else None)
+    if reference:
+        try:
+            world = load_world(reference)
+        except ValueError as error:
+            raise CliError(str(error)) from None
     scenario = None
     if args.scenario:
-        scenario, issues = load_scenario(args.scenario, model)
+        scenario, issues = load_scenario(args.scenario, model, world.events if world is not None else None)
         if issues:
             return report_failed(args.scenario, issues)
 
@@ -128,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
             root = load_tree(args.tree, manager=system.manager, stubs=stubs)
         except TreeFileError as error:
             return report_failed(args.tree, error.issues)
-        tree = system.tree(root)
+        tree = system.tree(root, **(world.attach(system) if world is not None else {}))
         view = None
         if args.view is not None or args.record:
             from sm_bt.view import attach_view
@@ -141,8 +151,9 @@ def run(args: argparse.Namespace) -> int:
             if view.url:
                 print(f"view: {view.url}", file=sys.stderr, flush=True)
         try:
-            checks = Checks(scenario, system) if scenario is not None else None
-            code = _tick(system, tree, args, speed, checks)
+            on_failure = (lambda text: view.note("expectation", text)) if view is not None else None
+            checks = Checks(scenario, system, world, on_failure) if scenario is not None else None
+            code = _tick(system, tree, args, speed, checks, world)
             if view is not None and view.url:
                 view.stay(lambda line: print(line, file=sys.stderr, flush=True))
             return code
@@ -165,10 +176,10 @@ def _speed(args: argparse.Namespace) -> float:
 
 
 def ticked(system: MissionSystem, tree: py_trees.trees.BehaviourTree, *, rate: float, speed: float,
-           until: float | None, checks: Checks | None, narrate: bool) -> Status:
-    """Tick until the root ends (or ``until``), applying the scenario's ``checks`` after each tick;
-    with ``narrate``, the manager's lines and the root's status on stderr, on the run's time. The
-    root's last status."""
+           until: float | None, checks: Checks | None, narrate: bool, world: SimulatedWorld | None = None) -> Status:
+    """Tick until the root ends (or ``until``), applying the scenario's ``checks`` after each tick
+    and letting the ``world`` advance after each step of time; with ``narrate``, the manager's
+    lines and the root's status on stderr, on the run's time. The root's last status."""
     clock = system.clock
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(_RunTime(clock.now))
@@ -192,6 +203,8 @@ def ticked(system: MissionSystem, tree: py_trees.trees.BehaviourTree, *, rate: f
             if status in (Status.SUCCESS, Status.FAILURE) or (until is not None and clock.now() >= until):
                 return status
             system.run(period)
+            if world is not None:
+                world.advance()
             if speed > 0:
                 time.sleep(period / speed)
     finally:
@@ -202,10 +215,10 @@ def ticked(system: MissionSystem, tree: py_trees.trees.BehaviourTree, *, rate: f
 
 
 def _tick(system: MissionSystem, tree: py_trees.trees.BehaviourTree, args: argparse.Namespace, speed: float,
-          checks: Checks | None) -> int:
+          checks: Checks | None, world: SimulatedWorld | None) -> int:
     """The run, then its summary on stdout; the exit code."""
     status = ticked(system, tree, rate=args.rate, speed=speed, until=args.until, checks=checks,
-                    narrate=not args.quiet)
+                    narrate=not args.quiet, world=world)
     now = system.clock.now()
     stopped = f" (stopped at --until {args.until:g} s)" if status == Status.RUNNING else ""
     print(f"{args.tree}: {status.value} at {now:.2f} s{stopped}")

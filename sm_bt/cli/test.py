@@ -48,6 +48,7 @@ class Outcome:
     seconds: float = 0.0  # wall time
     summary: str = ""
     recording: str = ""  # kept when it failed
+    failed_at: float = 0.0  # the run's time of its first failure
 
     @property
     def passed(self) -> bool:
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         for failure in outcome.failures:
             print(f"  {failure}")
         if outcome.recording:
-            print(f"  the run: sm-bt view {outcome.recording}")
+            print(f"  the run: sm-bt view {outcome.recording} --at {outcome.failed_at:.1f}")
     passed = sum(outcome.passed for outcome in outcomes)
     failed = len(outcomes) - passed
     print(f"{passed} passed, {failed} failed in {time.monotonic() - began:.2f} s")
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _one(path: str, runs: Path, *, ros: bool = False, attach: bool = False) -> Outcome:
     from sm_bt.cli.run import mission_system, ticked
-    from sm_bt.scenario import Checks, load_scenario, scenario_setup
+    from sm_bt.scenario import Checks, SimulatedWorld, load_scenario, load_world, scenario_setup
     from sm_bt.trees.mission_xml import TreeFileError, load_tree
     from sm_bt.trees.stubs import load_stubs
     from sm_bt.view import attach_view
@@ -94,8 +95,15 @@ def _one(path: str, runs: Path, *, ros: bool = False, attach: bool = False) -> O
     except (ModelError, CliError) as error:
         outcome.failures, outcome.summary = [f"the model {setup['model']}: {error}"], "cannot run it"
         return outcome
+    world: SimulatedWorld | None = None
+    if "world" in setup:
+        try:
+            world = load_world(setup["world"])
+        except ValueError as error:
+            outcome.failures, outcome.summary = [f"{path}: {error}"], "cannot run it"
+            return outcome
     stubs, stub_issues = load_stubs(setup["stubs"]) if "stubs" in setup else ({}, [])
-    scenario, scenario_issues = load_scenario(path, model)
+    scenario, scenario_issues = load_scenario(path, model, world.events if world is not None else None)
     if stub_issues or scenario_issues:
         outcome.failures = [str(issue) for issue in (*stub_issues, *scenario_issues)]
         outcome.summary = "cannot run it"
@@ -108,21 +116,23 @@ def _one(path: str, runs: Path, *, ros: bool = False, attach: bool = False) -> O
         except TreeFileError as error:
             outcome.failures, outcome.summary = [str(issue) for issue in error.issues], "cannot run it"
             return outcome
-        checks = Checks(scenario, system)
-        tree = system.tree(root)
+        tree = system.tree(root, **(world.attach(system) if world is not None else {}))
         with tempfile.TemporaryDirectory(prefix="sm-bt-test-") as scratch:
             recording = Path(scratch) / (Path(path).stem + ".jsonl")
             view = attach_view(tree, system.manager, port=None, record=recording)
+            checks = Checks(scenario, system, world, on_failure=lambda text: view.note("expectation", text))
             try:
                 with contextlib.redirect_stderr(io.StringIO()):
-                    status = ticked(system, tree, rate=10.0, speed=0.0, until=until, checks=checks, narrate=False)
+                    status = ticked(system, tree, rate=10.0, speed=0.0, until=until, checks=checks, narrate=False,
+                                    world=world)
+                checks.end(str(status.value), system.clock.now())
             finally:
                 view.close()
-            checks.end(str(status.value), system.clock.now())
             outcome.failures, outcome.held = list(checks.failures), len(checks.passed)
             if outcome.failures:  # kept; a passed scenario's run leaves nothing behind
                 runs.mkdir(parents=True, exist_ok=True)
                 outcome.recording = str(shutil.move(recording, runs / recording.name))
+                outcome.failed_at = checks.first_failure_at or 0.0
         outcome.summary = (f"{outcome.held} of {outcome.held + len(outcome.failures)} expectations held; the tree "
                            f"{status.value} at {system.clock.now():.2f} s")
     outcome.seconds = time.monotonic() - began

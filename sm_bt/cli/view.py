@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
+from sm_bt.cli.arguments import non_negative
 from sm_bt.cli.common import CliError
 
 
@@ -12,6 +13,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", metavar="FILE.jsonl", help="a run recorded with `sm-bt demo --record FILE.jsonl`")
     parser.add_argument("--port", type=int, default=8765, help="port to serve on (default 8765; 0: any free port)")
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    parser.add_argument("--at", type=non_negative, default=None, metavar="SECONDS",
+                        help="open the page at this moment of the run (sm-bt test prints the one where a scenario "
+                             "first failed)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"cannot serve on {args.host}:{args.port}: {error.strerror or error} (try --port 0)") from None
     except RuntimeError as error:
         raise CliError(str(error)) from None
-    print(f"{args.recording}: {len(frames)} frame(s); open {server.url} (Ctrl-C to stop)", flush=True)
+    url = server.url + (f"?at={args.at:g}" if args.at is not None else "")
+    print(f"{args.recording}: {len(frames)} frame(s); open {url} (Ctrl-C to stop)", flush=True)
     try:
         while True:
             time.sleep(3600)

@@ -40,8 +40,16 @@ class View:
     def url(self) -> str | None:
         return getattr(self.server, "url", None)
 
+    def note(self, kind: str, text: str) -> None:
+        """List an event of the run that is not the manager's (``"expectation"``: a scenario's
+        expectation failed: the timeline marks it), in a frame of its own at once, so that the
+        page shows it at the moment it happened."""
+        self.maker.note(kind, text)
+        self.maker.flush()
+
     def finish(self) -> None:
         """The run is over: no more frames; the page stays served and says so."""
+        self.maker.flush()
         self.maker.close()
         finish = getattr(self.server, "finish", None)
         if finish is not None:
@@ -57,6 +65,7 @@ class View:
                 time.sleep(3600)
 
     def close(self) -> None:
+        self.maker.flush()
         self.maker.close()
         if self.recorder is not None:
             self.recorder.close()

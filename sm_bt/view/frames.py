@@ -127,6 +127,20 @@ class FrameMaker:
             self._events.append(entry)
             self._table_due = True
 
+    def note(self, kind: str, text: str) -> None:
+        """An event of the run that is not the manager's (``"expectation"``: a scenario's
+        expectation failed), sent with the next frame (or by :meth:`flush`)."""
+        with self._events_lock:
+            self._events.append({"time": round(self._manager.clock.now() - self._epoch, 3), "kind": kind,
+                                 "part": "", "text": text})
+
+    def flush(self) -> None:
+        """Send the events not sent yet in a frame of their own (the run is over: no tick will)."""
+        with self._events_lock:
+            events, self._events = self._events, []
+        if events and self.last is not None:
+            self._emit(self._stamped({"events": events}))
+
     def __call__(self, tree: py_trees.trees.BehaviourTree) -> None:
         self._ticks += 1
         ticked = self._ticked.behaviours

@@ -79,6 +79,28 @@ def test_check_directory(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> 
     assert "Traceback" not in err
 
 
+def test_check_tells_scenarios_and_stubs_from_models_and_checks_what_a_scenario_names(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    examples = Path(__file__).parents[2] / "docs" / "examples"
+    for name in ("nav_mission.xml", "nav_stubs.yaml", "nav_scenario.yaml"):
+        (tmp_path / name).write_text((examples / name).read_text())
+    code, out, err = run(capsys, "check", tmp_path)
+    assert (code, err) == (0, "")
+    assert out.splitlines() == [
+        f"{tmp_path / 'nav_scenario.yaml'}: ok (scenario: 2 events, 4 expectations, against pilot)",
+        f"{tmp_path / 'nav_mission.xml'}: ok against pilot",
+        f"{tmp_path / 'nav_stubs.yaml'}: ok (stubs)",
+        f"{tmp_path / 'nav_mission.xml'}: ok against pilot",
+        "3 files checked, 0 failed"]
+    scenario = tmp_path / "nav_scenario.yaml"
+    scenario.write_text(scenario.read_text().replace("crash: laser_resender", "crash: laser_resendr"))
+    (tmp_path / "nav_stubs.yaml").write_text("FollowPath: {status: runing}\n")
+    code, out, err = run(capsys, "check", tmp_path)
+    assert code == 1
+    assert f"{scenario}:7: error: 'laser_resendr' is not a node of the model (did you mean 'laser_resender'?)" in err
+    assert f"{tmp_path / 'nav_stubs.yaml'}:1: error:" in err and "3 files checked, 2 failed" in err
+
+
 def test_check_invalid_yaml(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     broken = tmp_path / "broken.yaml"
     broken.write_text("a:\n  ros__parameters:\n    type: [node\n")
@@ -146,12 +168,15 @@ def test_check_a_tree_file_against_the_model_given_with_it(capsys: pytest.Captur
 
 
 def test_the_projects_own_models_and_trees_check_clean(capsys: pytest.CaptureFixture[str]) -> None:
-    """The shipped tree names its model (<!-- sm_bt model: pilot -->): not checked against the others."""
+    """The shipped tree names its model (<!-- sm_bt model: pilot -->): not checked against the others;
+    the pilot's scenarios are checked as scenarios, with the tree they name."""
     root = Path(__file__).resolve().parents[2]
     code, out, err = run(capsys, "check", root / "models", root / "trees")
     assert (code, err) == (0, ""), err
+    scenarios = root / "trees" / "pilot" / "scenarios"
+    assert f"{scenarios / 'laser_failure.yaml'}: ok (scenario: 2 events, 5 expectations, against pilot)" in out
     assert out.splitlines()[-2:] == [f"{root / 'trees' / 'pilot' / 'pilot.xml'}: ok against pilot",
-                                     "4 files checked, 0 failed"]
+                                     "6 files checked, 0 failed"]
 
 
 def test_a_tree_is_checked_against_the_model_it_names_or_model_or_each_given_saying_which(

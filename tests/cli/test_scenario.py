@@ -82,7 +82,7 @@ extras: 1
         f"{path}:2: error: 'lidar' is not a node of the model",
         f"{path}:3: error: at is seconds of the run (0 or more), not '-2'",
         f"{path}:4: error: no event 'explode' (events: crash, vanish, restart, fail_next, hang_next, "
-        "reject_parameters, set_parameter, request)",
+        "reject_parameters, set_parameter, request, world)",
         f"{path}:5: error: pilot has no mode 'f_nrmal_mode' (did you mean 'f_normal_mode'?) (modes: __DEFAULT__, "
         "f_normal_mode, f_degraded_mode, f_performance_mode, f_energy_saving_mode, f_slow_mode)",
         f"{path}:6: error: 'activte' is not a transition (did you mean 'activate'?) (transitions: configure, "
@@ -91,8 +91,39 @@ extras: 1
         f"{path}:9: error: tree ends as one of SUCCESS, FAILURE, RUNNING, not 'DONE'",
         f"{path}:10: error: an expectation is {{at: SECONDS, modes: {{PART: STATE[.MODE]}}}}, {{never: {{PART: "
         "STATE[.MODE]}} or {tree: SUCCESS|FAILURE|RUNNING}",
-        f"{path}:11: error: no section 'extras' (sections: events, expect, model, tree, stubs, until)",
+        f"{path}:11: error: no section 'extras' (sections: events, expect, model, tree, stubs, until, world)",
         f"{path}: failed (9 errors)"]
+
+
+def test_world_events_are_checked_against_the_world_the_scenario_names(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    from sm_bt.scenario import load_world
+
+    world = "world: sm_bt.trees.pilot.world:PilotWorld\n"
+    events = """events:
+  - {at: 1, world: {laser: brokn}}
+  - {at: 2, world: {door: open}}
+  - {at: 3, world: {laser: broken, battery: low}}
+expect:
+  - {tree: SUCCESS}
+"""
+    code, out, err = run(capsys, tmp_path, world + events)
+    path = tmp_path / "scenario.yaml"
+    assert (code, out) == (1, "")
+    assert err.splitlines() == [
+        f"{path}:3: error: laser is one of broken, repaired, not 'brokn' (did you mean 'broken'?)",
+        f"{path}:4: error: the world has no event 'door' (events: laser)",
+        f"{path}:5: error: a world event is {{NAME: VALUE}}, one at a time",
+        f"{path}: failed (3 errors)"]
+    code, out, err = run(capsys, tmp_path, events.replace("brokn", "broken"))
+    assert code == 1 and err.splitlines()[0] == (f"{path}:2: error: a world event needs the scenario's world "
+                                                 "(world: MODULE:NAME)")
+    for reference, message in (("nowhere.at_all:World", "cannot import nowhere.at_all"),
+                               ("sm_bt.trees.pilot.world:Nothing", "sm_bt.trees.pilot.world has no Nothing"),
+                               ("sm_bt.trees.pilot.world", "is not MODULE:NAME"),
+                               ("sm_bt.trees.pilot.world:World", "is not a world")):
+        with pytest.raises(ValueError, match=message):
+            load_world(reference)
 
 
 def test_each_kind_of_event_reaches_the_simulated_nodes(tmp_path: Path) -> None:

@@ -12,6 +12,8 @@ from test_scenario import SCENARIO, STUBS, TREE
 from sm_bt.cli import main
 from sm_bt.view import read_recording
 
+ROOT = Path(__file__).parents[2]
+
 
 def _write(tmp_path: Path, name: str, scenario: str) -> Path:
     (tmp_path / "mission.xml").write_text(TREE)
@@ -33,11 +35,14 @@ def test_scenarios_are_run_judged_and_written_for_ci(capsys: pytest.CaptureFixtu
         f"PASSED {good}: 5 of 5 expectations held; the tree SUCCESS at 4.10 s",
         f"FAILED {bad}: 4 of 5 expectations held; the tree SUCCESS at 4.10 s",
         f"  {bad}:11: the tree ended SUCCESS, expected FAILURE",
-        f"  the run: sm-bt view {runs / 'bad.jsonl'}"]
+        f"  the run: sm-bt view {runs / 'bad.jsonl'} --at 4.1"]
     assert lines[4].startswith("1 passed, 1 failed in ")
     assert sorted(path.name for path in runs.iterdir()) == ["bad.jsonl"]  # a failed one's run is kept
     frames = read_recording(runs / "bad.jsonl")
     assert frames[0]["time"] == 0.0 and frames[-1]["time"] >= 4.0  # the whole run, to its end
+    # The failure is in the run's events, at its time, for the view to list and mark on the timeline.
+    assert [(event["time"], event["text"]) for frame in frames for event in frame.get("events", ())
+            if event["kind"] == "expectation"] == [(4.1, f"{bad}:11: the tree ended SUCCESS, expected FAILURE")]
     suite = ET.parse(junit).getroot()
     assert (suite.get("tests"), suite.get("failures")) == ("2", "1")
     cases = {case.get("name"): case for case in suite.iter("testcase")}
@@ -52,3 +57,21 @@ def test_a_scenario_that_cannot_run_says_why(capsys: pytest.CaptureFixture[str],
     assert capsys.readouterr().out.splitlines()[:3] == [
         f"FAILED {path}: cannot run it", f"  {path}: name the model to run it with (model: ...)",
         f"  {path}: name the tree to run it with (tree: ...)"]
+
+
+def test_the_pilots_stories_ship_as_scenarios_and_pass(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    shipped = sorted((ROOT / "trees" / "pilot" / "scenarios").glob("*.yaml"))
+    assert [path.name for path in shipped] == ["battery.yaml", "laser_failure.yaml"]
+    code = main(["test", *map(str, shipped), "--runs", str(tmp_path / "runs")])
+    out, _ = capsys.readouterr()
+    assert code == 0, out
+    assert [line.split(":")[0] for line in out.splitlines()[:2]] == [f"PASSED {path}" for path in shipped]
+    # The world's laser matters: never repaired, the pilot stays degraded and the expectation says so.
+    never_repaired = tmp_path / "laser_failure.yaml"
+    never_repaired.write_text(shipped[1].read_text().replace("tree: ../pilot.xml", f"tree: {shipped[1].parent.parent}"
+                                                             "/pilot.xml").replace(
+        "  - {at: 40.0, world: {laser: repaired}}\n", ""))
+    code = main(["test", str(never_repaired), "--runs", str(tmp_path / "runs")])
+    out, _ = capsys.readouterr()
+    assert code == 1
+    assert f"  {never_repaired}:13: at 45 s pilot is active.f_degraded_mode, expected active.f_normal_mode" in out, out

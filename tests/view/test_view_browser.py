@@ -10,10 +10,13 @@ screenshots, of the whole window, go to build/view/ (look at them).
 docs/view.png is such a screenshot (the demo's laser failure being handled, 1280x800). It carries
 a fingerprint of the page's sources and of the demo tree's shape (a PNG text chunk):
 ``SM_BT_WRITE_VIEW_PNG=1 pytest tests/view -k docs`` takes it again, and otherwise
-test_docs_view_png_is_current fails once the page or the tree changed since it was taken."""
+test_docs_view_png_is_current fails once the page or the tree changed since it was taken. So is
+docs/mission-failed.png: the run of a scenario whose expectation failed (`sm-bt test`), opened
+at the failing moment as `sm-bt view --at` opens it."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
@@ -49,6 +52,8 @@ ROOT = Path(__file__).resolve().parents[2]
 SHOTS = ROOT / "build" / "view"
 SIZES = ((1280, 800), (1600, 1000), (1920, 1080))
 DOCS_PNG = ROOT / "docs" / "view.png"
+FAILED_PNG = ROOT / "docs" / "mission-failed.png"
+EXAMPLES = ROOT / "docs" / "examples"
 WRITE_DOCS_PNG = "SM_BT_WRITE_VIEW_PNG"
 #: The moment docs/view.png shows: recovery gave up on the laser, the pilot goes to degraded mode;
 #: the timeline zoomed into the first minute.
@@ -227,13 +232,15 @@ def test_a_page_load_of_the_demo_weighs_under_3_mb(recording: list[Frame]) -> No
     assert assets > 1_000_000, "the assets were loaded too"
 
 
-def _fingerprint() -> str:
-    """The page's sources and the demo tree's shape: what docs/view.png shows."""
+def _fingerprint(*files: Path) -> str:
+    """The page's sources and the demo tree's shape: what docs/view.png shows (and ``files``)."""
     digest = hashlib.sha256()
     for path in sorted(STATIC.glob("*.*")):
         digest.update(path.name.encode() + path.read_bytes())
     root = pilot.create_root(2)
     digest.update(repr([(b.name, len(b.children)) for b in root.iterate()]).encode())
+    for path in files:
+        digest.update(path.name.encode() + path.read_bytes())
     return digest.hexdigest()[:16]
 
 
@@ -269,6 +276,44 @@ def test_docs_view_png_is_current(replay: ViewServer) -> None:
     assert _text_of(png) == _fingerprint(), (
         f"docs/view.png shows an older page or tree: take it again with {WRITE_DOCS_PNG}=1 "
         "pytest tests/view -k docs_view_png (and look at it)")
+
+
+def test_a_failed_expectation_is_listed_and_marked_at_its_moment(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """The documentation's scenario with one expectation changed, as docs/mission-tests.md tells."""
+    from sm_bt.cli import main
+
+    for name in ("nav_mission.xml", "nav_stubs.yaml", "nav_scenario.yaml"):
+        shutil.copy(EXAMPLES / name, tmp_path / name)
+    scenario = tmp_path / "nav_scenario.yaml"
+    scenario.write_text(scenario.read_text().replace("{at: 3.5, modes: {pilot: active.f_slow_mode,",
+                                                     "{at: 3.5, modes: {pilot: active.f_degraded_mode,"))
+    monkeypatch.chdir(tmp_path)  # the scenario's name as a person types it
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["test", "nav_scenario.yaml", "--runs", "runs"]) == 1
+    found = re.search(r"the run: sm-bt view (\S+) --at ([\d.]+)", out.getvalue())
+    assert found, out.getvalue()
+    server = ViewServer(port=0, frames=read_recording(found[1]))
+    try:
+        shot = SHOTS / "mission-failed-1280x800.png"
+        dom = _browse(f"{server.url}?check&at={found[2]}", screenshot=shot)
+    finally:
+        server.close()
+    report = _report(dom)
+    _assert_nothing_cut(report, "a failed expectation")
+    assert report["current"][-1]["name"].startswith("3.50 s  nav_scenario.yaml:10: at 3.5 s"), report["current"]
+    assert '<li class="expectation now" data-index=' in dom, "listed as the newest event of the moment shown"
+    assert '<line x1=' in dom and 'class="expectation"' in dom, "the timeline marks the failure"
+    fingerprint = _fingerprint(*(EXAMPLES / name for name in ("nav_mission.xml", "nav_stubs.yaml",
+                                                              "nav_scenario.yaml")))
+    if os.environ.get(WRITE_DOCS_PNG):
+        FAILED_PNG.write_bytes(_with_text(shot.read_bytes(), fingerprint))
+    png = FAILED_PNG.read_bytes()
+    assert png[16:24] == struct.pack(">II", 1280, 800), "docs/mission-failed.png is a 1280x800 screenshot"
+    assert _text_of(png) == fingerprint, (
+        f"docs/mission-failed.png shows an older page or scenario: take it again with {WRITE_DOCS_PNG}=1 "
+        "pytest tests/view -k failed_expectation (and look at it)")
 
 
 def test_the_demo_serves_its_view_when_asked() -> None:

@@ -12,7 +12,9 @@ receives all-zero scans (deactivate -> on_deactivate ERROR -> errorprocessing ->
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 from sm_bt.engine.lifecycle import Outcome, Transition
 from sm_bt.model.states import State
@@ -117,3 +119,41 @@ class LaserDevice:
         if self.backend.node(self.node).state is State.ACTIVE:
             self.backend.trigger(self.node, Transition.DEACTIVATE, outcome=Outcome.ERROR)
             self.failures += 1
+
+
+class PilotWorld:
+    """The pilot's world in a scenario (``world: sm_bt.trees.pilot.world:PilotWorld``, see
+    :mod:`sm_bt.scenario`): the robot, its battery and its laser, with the event ``laser:
+    broken|repaired``. On simulated nodes :class:`LaserDevice` makes laser_resender fail while the
+    laser is broken; on ROS 2 its ``sim.broken`` parameter does."""
+
+    events: ClassVar[dict[str, tuple[str, ...]]] = {"laser": ("broken", "repaired")}
+
+    def __init__(self) -> None:
+        self.world = World()
+        self._device: LaserDevice | None = None
+        self._set_broken: Callable[[bool], None] | None = None
+
+    def attach(self, system: Any) -> dict[str, Any]:
+        backend = getattr(system, "backend", None)
+        if isinstance(backend, SimBackend):
+            self._device = LaserDevice(self.world, backend)
+        else:
+            self._set_broken = lambda broken: system.set_parameter("laser_resender", "sim.broken", broken)
+        return {"world": self.world}
+
+    def advance(self) -> None:
+        if self._device is not None:
+            self._device.update()
+
+    def event(self, name: str, value: str) -> None:
+        broken = value == "broken"
+        if self._device is not None:
+            if broken:
+                self._device.break_laser()
+            else:
+                self._device.repair()
+        else:
+            self.world.laser_ok = not broken
+            if self._set_broken is not None:
+                self._set_broken(broken)

@@ -14,6 +14,7 @@ var timeline = (function () {
   var parts = [];        // in the table's order
   var segments = {};     // part -> [{from, actual, error}]
   var requests = {};     // request number -> {part, from, to, ok, text}
+  var marks = [];        // failed expectations of a scenario: {time, text}
   var end = 0;           // the latest time seen
   var windowed = null;   // {from, to} zoomed into, or null: the whole run
   var lastNow;
@@ -32,6 +33,7 @@ var timeline = (function () {
       });
     }
     (frame.events || []).forEach(function (event) {
+      if (event.kind === "expectation") { marks.push({time: event.time, text: event.text}); }
       if (event.kind !== "request" || event.request === undefined) { return; }
       var request = requests[event.request];
       if (!request) {
@@ -121,6 +123,12 @@ var timeline = (function () {
     if (now !== undefined && now >= shown.from && now <= shown.to) {
       svg.appendChild(el("line", {x1: x(now), x2: x(now), y1: 0, y2: parts.length * ROW, "class": "cursor"}));
     }
+    // Over the cursor: a failure stays visible at the moment it is shown.
+    marks.forEach(function (mark) {
+      if (mark.time < shown.from || mark.time > shown.to) { return; }
+      svg.appendChild(el("line", {x1: x(mark.time), x2: x(mark.time), y1: 0, y2: parts.length * ROW,
+                                  "class": "expectation"}, mark.text));
+    });
     svg.dataset.label = String(label);
     svg.dataset.scale = String(scale);
     svg.dataset.from = String(shown.from);
@@ -150,7 +158,7 @@ var timeline = (function () {
   }, {passive: false});
   svg.addEventListener("dblclick", function () { windowed = null; draw(lastNow); });
 
-  function reset() { parts = []; segments = {}; requests = {}; end = 0; windowed = null; }
+  function reset() { parts = []; segments = {}; requests = {}; marks = []; end = 0; windowed = null; }
 
   return {add: add, draw: draw, reset: reset, seek: function (callback) { onSeek = callback; },
           zoom: function (from, to) { windowed = to > from ? {from: from, to: to} : null; }};
