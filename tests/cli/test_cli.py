@@ -87,7 +87,7 @@ def test_check_tells_scenarios_and_stubs_from_models_and_checks_what_a_scenario_
     code, out, err = run(capsys, "check", tmp_path)
     assert (code, err) == (0, "")
     assert out.splitlines() == [
-        f"{tmp_path / 'nav_scenario.yaml'}: ok (scenario: 2 events, 4 expectations, against pilot)",
+        f"{tmp_path / 'nav_scenario.yaml'}: ok (scenario: 3 events, 5 expectations, against pilot)",
         f"{tmp_path / 'nav_mission.xml'}: ok against pilot",
         f"{tmp_path / 'nav_stubs.yaml'}: ok (stubs)",
         f"{tmp_path / 'nav_mission.xml'}: ok against pilot",
@@ -97,7 +97,7 @@ def test_check_tells_scenarios_and_stubs_from_models_and_checks_what_a_scenario_
     (tmp_path / "nav_stubs.yaml").write_text("FollowPath: {status: runing}\n")
     code, out, err = run(capsys, "check", tmp_path)
     assert code == 1
-    assert f"{scenario}:7: error: 'laser_resendr' is not a node of the model (did you mean 'laser_resender'?)" in err
+    assert f"{scenario}:8: error: 'laser_resendr' is not a node of the model (did you mean 'laser_resender'?)" in err
     assert f"{tmp_path / 'nav_stubs.yaml'}:1: error:" in err and "3 files checked, 2 failed" in err
 
 

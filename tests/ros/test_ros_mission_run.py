@@ -42,10 +42,10 @@ def test_the_documented_scenario_passes_and_fails_on_ros_as_on_simulated_nodes(
     out, err = capsys.readouterr()
     assert (code, err) == (1, ""), out
     lines = out.splitlines()
-    assert re.fullmatch(rf"PASSED {re.escape(str(good))}: 5 of 5 expectations held; the tree SUCCESS at "
+    assert re.fullmatch(rf"PASSED {re.escape(str(good))}: 6 of 6 expectations held; the tree SUCCESS at "
                         r"\d+\.\d\d s", lines[0]), out
-    assert lines[1].startswith(f"FAILED {bad}: 4 of 5 expectations held"), out
-    assert lines[2] == f"  {bad}:10: at 3.5 s pilot is active.f_slow_mode, expected active.f_degraded_mode", out
+    assert lines[1].startswith(f"FAILED {bad}: 5 of 6 expectations held"), out
+    assert lines[2] == f"  {bad}:12: at 3.5 s pilot is active.f_slow_mode, expected active.f_degraded_mode", out
     assert re.fullmatch(rf"  the run: sm-bt view {re.escape(str(runs / 'nav_scenario_bad.jsonl'))} --at 3\.[5-9]",
                         lines[3]), lines[3]
     suite = ET.parse(junit).getroot()

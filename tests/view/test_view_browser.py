@@ -302,7 +302,7 @@ def test_a_failed_expectation_is_listed_and_marked_at_its_moment(tmp_path: Path,
         server.close()
     report = _report(dom)
     _assert_nothing_cut(report, "a failed expectation")
-    assert report["current"][-1]["name"].startswith("3.50 s  nav_scenario.yaml:10: at 3.5 s"), report["current"]
+    assert report["current"][-1]["name"].startswith("3.50 s  nav_scenario.yaml:12: at 3.5 s"), report["current"]
     assert '<li class="expectation now" data-index=' in dom, "listed as the newest event of the moment shown"
     assert '<line x1=' in dom and 'class="expectation"' in dom, "the timeline marks the failure"
     fingerprint = _fingerprint(*(EXAMPLES / name for name in ("nav_mission.xml", "nav_stubs.yaml",
