@@ -88,6 +88,8 @@ class RosSystem:
             stack.callback(self.runtime.close)
             self.manager: ModeManager = self.runtime.manager
             began = time.monotonic()
+            if attach:
+                self._say(f"waiting up to {REACH_TIMEOUT:g} s for the model's nodes on the ROS graph")
             try:
                 self.runtime.wait_for_nodes(REACH_TIMEOUT)
             except TimeoutError as error:

@@ -160,6 +160,7 @@ def test_while_do_else_asks_the_condition_every_tick_and_halts_the_branch_it_lea
     (ForceSuccess, [R, F], [R, S]), (ForceSuccess, [S], [S]),
     (ForceFailure, [R, S], [R, F]), (ForceFailure, [F], [F]),
     (KeepRunningUntilFailure, [S, R, S, F], [R, R, R, F]),
+    (py_trees.decorators.Inverter, [R, S], [R, F]), (py_trees.decorators.Inverter, [F], [S]),
 ])
 def test_force_and_keep_running_decorators(cls: type, script: list[Status], expected: list[Status]) -> None:
     child = Scripted("child", *script)
@@ -246,3 +247,21 @@ def test_a_bad_attribute_of_a_bt_cpp_node_is_an_error_with_its_line(tmp_path: Pa
     assert [str(issue) for issue in check_tree(path, bundled("pilot"))] == [
         f"{path}:4: error: <RecoveryNode 'NavigateRecovery'>: number_of_retries must be a whole number, not 'two'",
         f"{path}:6: error: <RateController 'RateController'>: hz must be more than 0, not 0.0"]
+
+
+def test_an_inverter_in_xml_is_py_trees_inverter_around_its_child(tmp_path: Path) -> None:
+    path = tmp_path / "inverted.xml"
+    path.write_text('<root main_tree_to_execute="M"><BehaviorTree ID="M">'
+                    '<Inverter name="Not"><Work/></Inverter></BehaviorTree></root>')
+    from sm_bt.trees.stubs import Stub
+
+    root = load_tree(path, stubs={"Work": Stub(R, 1.0, F)})
+    assert isinstance(root, py_trees.decorators.Inverter) and root.name == "Not"
+    tree = py_trees.trees.BehaviourTree(root)
+    clock = FakeClock()
+    tree.setup(clock=type("C", (), {"now": staticmethod(clock)})())
+    tree.tick()
+    assert root.status is R
+    clock.now = 1.5
+    tree.tick()
+    assert root.status is S  # the stand-in failed after its second of RUNNING
