@@ -61,3 +61,13 @@ class NodeObservation:
     @property
     def reachable(self) -> bool:
         return self.seen and not self.gone
+
+
+def out_of_reach(node: str, obs: NodeObservation, target: StateMode) -> str:
+    """Why ``node`` cannot be taken to ``target`` as far as its observation says ("" if it can):
+    what a refused request, and a preview, say."""
+    if obs.gone:
+        return f"{node} is not reachable ({obs.gone})"
+    if obs.state is State.FINALIZED and target.state is not State.FINALIZED:
+        return f"{node} is finalized (it must be restarted)"
+    return ""

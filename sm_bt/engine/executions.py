@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable, Mapping
 
+from sm_bt.engine.actual import out_of_reach
 from sm_bt.engine.clock import Clock, TimerHandle
 from sm_bt.engine.divergences import Divergences
 from sm_bt.engine.drivers import NodeDriver
@@ -195,12 +196,7 @@ class Executions:
 
     def _out_of_reach(self, node: str, target: StateMode) -> str:
         """Why ``node`` cannot be taken to ``target`` as far as the manager knows ("" if it can)."""
-        obs = self._inference.observation(node)
-        if obs.gone:
-            return f"{node} is not reachable ({obs.gone})"
-        if obs.state is State.FINALIZED and target.state is not State.FINALIZED:
-            return f"{node} is finalized (it must be restarted)"
-        return ""
+        return out_of_reach(node, self._inference.observation(node), target)
 
     def _continue(self, preempted: Execution, nodes: frozenset[str]) -> None:
         """Carry on with ``nodes`` of a preempted request: their targets are still what it asked."""

@@ -45,6 +45,7 @@ from sm_bt.engine.lifecycle import (
     transition_by_label,
 )
 from sm_bt.engine.presence import NodeReports, NodeReturn
+from sm_bt.engine.preview import Configuration, Preview, preview
 from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.responses import Responses
@@ -253,27 +254,63 @@ class ModeManager:
         transition that does not exist or cannot be requested; one not valid from where the part
         is now is a refused request."""
         with self._serial:
-            name = transition.label if isinstance(transition, Transition) else str(transition)
-            description = f"change_state {part} {name}"
             self._check_part(part)
-            current = self._inference.actual(part).state
-            try:
-                resolved = self._resolve_transition(transition, current)
-            except ValueError as error:
-                raise RequestError(f"{description}: {error} (transitions: {', '.join(REQUESTABLE_LABELS)})"
-                                   f"{did_you_mean(name, REQUESTABLE_LABELS)}") from None
-            if resolved not in _GOAL:
-                raise RequestError(f"{description}: {resolved.label} ({int(resolved)}) cannot be requested "
-                                   f"(transitions: {', '.join(REQUESTABLE_LABELS)})")
-            goal = _GOAL[resolved]
-            try:
-                if current.is_primary and goal is not current and not self._moving(part):
-                    edge_for(current, resolved)  # raises with the valid ones when invalid here
-            except PlanError as error:
-                return self._executions.refuse(part, description, f"{part}: {error}", requester)
-            mode = self._ledger.mode_for_activation(part) if goal is State.ACTIVE else None
-            return self._executions.start(part, StateMode(goal, mode), description, Origin.USER, timeout, resolved,
+            description, target, resolved, refusal = self._state_target(
+                part, transition, self._inference.actual(part).state, self._moving(part))
+            if refusal:
+                return self._executions.refuse(part, description, refusal, requester)
+            return self._executions.start(part, target, description, Origin.USER, timeout, resolved,
                                           requester=requester)
+
+    def preview(self, part: str, mode: str, *, from_: Configuration | None = None) -> Preview:
+        """The plan ``change_mode(part, mode)`` would be carried out by now, without doing anything:
+        stages, each node's calls and parameter changes, rules that would start or stop firing,
+        or why it would be refused (:class:`~sm_bt.engine.preview.Preview`). ``from_``: preview
+        from that configuration instead (:func:`~sm_bt.engine.preview.configuration`; offline)."""
+        description = f"change_mode {part} {mode}"
+        with self._serial:
+            target = self._mode_target(part, StateMode(State.ACTIVE, mode or DEFAULT_MODE), description)
+            return self._preview(part, target, description, "", from_)
+
+    def preview_state(self, part: str, transition: Transition | str | int, *,
+                      from_: Configuration | None = None) -> Preview:
+        """The plan ``change_state(part, transition)`` would be carried out by now (see :meth:`preview`)."""
+        with self._serial:
+            self._check_part(part)
+            config = from_ or Configuration(self._inference)
+            current = config.actual(part).state
+            description, target, _, refusal = self._state_target(part, transition, current,
+                                                                  from_ is None and self._moving(part))
+            if target.state is State.ACTIVE and from_ is not None:
+                target = StateMode(State.ACTIVE, self.model.parts[part].default_mode)
+            return self._preview(part, target, description, refusal, from_)
+
+    def _preview(self, part: str, target: StateMode, description: str, refusal: str,
+                 from_: Configuration | None) -> Preview:
+        return preview(self.model, from_ or Configuration(self._inference), part, target, description, refusal)
+
+    def _state_target(self, part: str, transition: Transition | str | int, current: State,
+                      moving: bool) -> tuple[str, StateMode, Transition, str]:
+        """``change_state``'s description, target, transition, and why it is refused ("" if not)."""
+        name = transition.label if isinstance(transition, Transition) else str(transition)
+        description = f"change_state {part} {name}"
+        try:
+            resolved = self._resolve_transition(transition, current)
+        except ValueError as error:
+            raise RequestError(f"{description}: {error} (transitions: {', '.join(REQUESTABLE_LABELS)})"
+                               f"{did_you_mean(name, REQUESTABLE_LABELS)}") from None
+        if resolved not in _GOAL:
+            raise RequestError(f"{description}: {resolved.label} ({int(resolved)}) cannot be requested "
+                               f"(transitions: {', '.join(REQUESTABLE_LABELS)})")
+        goal = _GOAL[resolved]
+        refusal = ""
+        try:
+            if current.is_primary and goal is not current and not moving:
+                edge_for(current, resolved)  # raises with the valid ones when invalid here
+        except PlanError as error:
+            refusal = f"{part}: {error}"
+        mode = self._ledger.mode_for_activation(part) if goal is State.ACTIVE else None
+        return description, StateMode(goal, mode), resolved, refusal
 
     def change_to(self, part: str, target: StateMode | str, *, timeout: float | None = None,
                   requester: str = "user") -> Request:
@@ -320,6 +357,12 @@ class ModeManager:
                  requester: str) -> Request:
         """Start a user request for ``wanted`` (an active mode resolved: ``__DEFAULT__`` is the
         default mode); :class:`RequestError` with the part's real names for one it does not have."""
+        wanted = self._mode_target(part, wanted, description)
+        return self._executions.start(part, wanted, description, Origin.USER, timeout, requester=requester)
+
+    def _mode_target(self, part: str, wanted: StateMode, description: str) -> StateMode:
+        """``wanted`` with an active mode resolved (``__DEFAULT__``: the default mode);
+        :class:`RequestError` with the part's real names for a part or mode it does not have."""
         self._check_part(part)
         if wanted.state is State.ACTIVE:
             resolved = resolve_mode(self.model.parts[part], wanted.mode or DEFAULT_MODE)
@@ -328,7 +371,7 @@ class ModeManager:
                 raise RequestError(f"{description}: unknown mode {wanted.mode!r} of {part}"
                                    f"{did_you_mean(wanted.mode or '', modes)} (modes: {', '.join(modes)})")
             wanted = StateMode(State.ACTIVE, resolved)
-        return self._executions.start(part, wanted, description, Origin.USER, timeout, requester=requester)
+        return wanted
 
     # -- reachability ---------------------------------------------------------------------------
 

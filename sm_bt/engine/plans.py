@@ -99,9 +99,10 @@ class _Composite(Job):
 
 
 class Sequence(_Composite):
-    """Children one after another (the stages of a switching order)."""
+    """Children one after another (the stages of ``system``'s switching order)."""
 
     index = 0
+    system = ""
 
     def start(self) -> None:
         self._next()
@@ -169,6 +170,7 @@ def build_plan(model: Model, run: Run, part: str, target: StateMode,
             continue
         wanted = dict(child_targets(spec, value))
         sequence = Sequence(run)
+        sequence.system = name
         into.append(sequence)
         pending: list[tuple[str, StateMode, list[Job]]] = []
         for stage in _stages(spec, value):
