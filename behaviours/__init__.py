@@ -5,6 +5,7 @@ Every behaviour finds the embedded :class:`~sm_bt.ModeManager` through its own `
 blocks a tick:
 
 * :class:`ChangeMode`, :class:`ChangeState`: request a change, RUNNING until confirmed
+* :class:`CanChangeMode`: could a change be made now (a preview: nothing is asked)
 * :class:`ModeIs`, :class:`StateIs`: checks (SUCCESS/FAILURE in one tick)
 * :class:`WaitForMode`, :class:`WaitForState`: wait until the part gets there
 * :class:`OnDivergence`: a condition on a part straying from its target
@@ -15,7 +16,7 @@ blocks a tick:
 """
 
 from sm_bt.behaviours.blackboard import ModesToBlackboard, PartStatus
-from sm_bt.behaviours.change import TRANSITIONS, ChangeMode, ChangeState
+from sm_bt.behaviours.change import TRANSITIONS, CanChangeMode, ChangeMode, ChangeState
 from sm_bt.behaviours.checks import ModeIs, StateIs, WaitForMode, WaitForState
 from sm_bt.behaviours.divergence import OnDivergence
 from sm_bt.behaviours.idioms import (
@@ -31,6 +32,7 @@ from sm_bt.behaviours.visitors import FeedbackSnapshotVisitor
 
 __all__ = [
     "TRANSITIONS",
+    "CanChangeMode",
     "ChangeMode",
     "ChangeState",
     "FeedbackSnapshotVisitor",

@@ -14,6 +14,7 @@ from py_trees.common import Status
 from sm_bt.behaviours.manager_access import REQUESTER, ManagerBehaviour, require_mode_name, seconds
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition
 from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.preview import Preview
 from sm_bt.engine.requests import Request
 from sm_bt.model.types import Model
 
@@ -30,6 +31,8 @@ class _RequestBehaviour(ManagerBehaviour, register=False):
         self.part = part
         self.timeout = seconds(name, timeout)
         self.request: Request | None = None
+        #: The change as previewed before it was asked for (``ChangeMode``), or ``None``.
+        self.plan: Preview | None = None
 
     def _make_request(self, manager: ModeManager) -> Request | None:
         """Ask the manager (it returns at once); ``None`` when there is nothing to ask for."""
@@ -47,7 +50,8 @@ class _RequestBehaviour(ManagerBehaviour, register=False):
         if request is None:  # ticked without initialise: py_trees never does this
             return Status.INVALID
         if not request.done:
-            self.feedback_message = request.feedback
+            planned = f" (plan: {self.plan.calls} calls)" if self.plan is not None and self.plan.possible else ""
+            self.feedback_message = request.feedback + planned
             return Status.RUNNING
         if request.succeeded:
             self.feedback_message = f"{self.part} is {request.target} ({request.elapsed or 0.0:.2f} s)"
@@ -67,9 +71,11 @@ class _RequestBehaviour(ManagerBehaviour, register=False):
 class ChangeMode(_RequestBehaviour):
     """Put ``part`` (a system or a node) in ``mode``, active.
 
-    * ``initialise``: request the change (``ModeManager.change_mode``)
-    * ``update``: RUNNING while in progress, SUCCESS when the manager confirms the part's
-      inferred actual state is ``active.<mode>``, FAILURE with the manager's reason otherwise
+    * ``initialise``: preview the change (``plan``: :meth:`ModeManager.preview`), then request
+      it (``ModeManager.change_mode``)
+    * ``update``: RUNNING while in progress (feedback: the step in progress, and the plan's
+      calls), SUCCESS when the manager confirms the part's inferred actual state is
+      ``active.<mode>``, FAILURE with the manager's reason otherwise
     * ``terminate``: withdraw the request when interrupted while RUNNING
 
     ``timeout`` (seconds of the manager's clock) bounds the whole change; ``None`` takes the
@@ -90,7 +96,40 @@ class ChangeMode(_RequestBehaviour):
         self._check_mode(model, self.part, self.mode)
 
     def _make_request(self, manager: ModeManager) -> Request:
+        self.plan = manager.preview(self.part, self.mode)
         return manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER)
+
+
+class CanChangeMode(ManagerBehaviour):
+    """Could ``part`` be put in ``mode`` now? A check before committing to a contingency.
+
+    * ``update``: SUCCESS when the manager could carry the change out from where the parts are
+      now (feedback: the plan's calls), FAILURE when it would refuse it (feedback: why, in the
+      words a refused request uses: a node out of reach, finalized, ...). One tick, never
+      RUNNING; nothing is asked of the nodes. ``plan``: the last preview.
+
+    An unknown part or mode is an error at ``setup``.
+    """
+
+    def __init__(self, name: str, part: str, mode: str, *, manager: ModeManager | None = None, **kwargs: Any) -> None:
+        super().__init__(name, manager=manager, **kwargs)
+        require_mode_name(name, part, mode)
+        self.part = part
+        self.mode = mode
+        self.plan: Preview | None = None
+
+    @property
+    def detail(self) -> str:
+        return f"{self.part} {self.mode}"
+
+    def check_model(self, model: Model) -> None:
+        self._check_mode(model, self.part, self.mode)
+
+    def update(self) -> Status:
+        """SUCCESS if the change could be made now, FAILURE with the reason it could not."""
+        self.plan = self.manager.preview(self.part, self.mode)
+        self.feedback_message = self.plan.summary()
+        return Status.SUCCESS if self.plan.possible else Status.FAILURE
 
 
 class ChangeState(_RequestBehaviour):
@@ -124,4 +163,4 @@ class ChangeState(_RequestBehaviour):
         return manager.change_state(self.part, self.transition, timeout=self.timeout, requester=REQUESTER)
 
 
-__all__ = ["TRANSITIONS", "ChangeMode", "ChangeState"]
+__all__ = ["TRANSITIONS", "CanChangeMode", "ChangeMode", "ChangeState"]

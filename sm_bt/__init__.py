@@ -11,6 +11,7 @@ from sm_bt.engine.events import Cause, Divergence, Event, EventKind, Subscriptio
 from sm_bt.engine.inference import Actual
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.preview import Preview, configuration
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.errors import Error, ModelError, RequestError
 from sm_bt.model.loader import load_model
@@ -31,11 +32,13 @@ __all__ = [
     "Model",
     "ModelError",
     "Origin",
+    "Preview",
     "Request",
     "RequestError",
     "State",
     "StateMode",
     "Subscription",
     "Transition",
+    "configuration",
     "load_model",
 ]

@@ -1,10 +1,10 @@
 """``sm-bt``: the table of commands, the parser built from it, and :func:`main`.
 
 Each command lives in a module of its own in this package (``check``, ``modes``, ``demo``,
-``monitor``, ``view``, ``daemon``, ``manager``, ``mission``, ``run``, ``test``, ``sim_nodes``, ``remote``) with an
-``add_arguments(parser)`` and a ``run(args)`` that returns the exit code; what commands share is
-in :mod:`sm_bt.cli.common` (the program's name, :class:`~sm_bt.cli.common.CliError`, loading a
-model by path or bundled name) and
+``monitor``, ``view``, ``plan``, ``daemon``, ``manager``, ``mission``, ``run``, ``test``,
+``sim_nodes``, ``remote``) with an ``add_arguments(parser)`` and a ``run(args)`` that returns
+the exit code; what commands share is in :mod:`sm_bt.cli.common` (the program's name,
+:class:`~sm_bt.cli.common.CliError`, loading a model by path or bundled name) and
 :mod:`sm_bt.cli.arguments` (argument types). To add a command, write its module and add a
 :class:`~sm_bt.cli.common.Command` to :data:`COMMANDS`.
 
@@ -18,7 +18,7 @@ import argparse
 import os
 import sys
 
-from sm_bt.cli import check, daemon, demo, manager, mission, modes, monitor, remote, run, sim_nodes, test, view
+from sm_bt.cli import check, daemon, demo, manager, mission, modes, monitor, plan, remote, run, sim_nodes, test, view
 from sm_bt.cli.common import PROG, CliError, Command, UsageError
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.types import DEFAULT_MODE
@@ -31,6 +31,12 @@ COMMANDS: list[Command] = [
             modes.run, description="Print the hierarchy of a model: systems (nested ones indented) with "
                                    f"their modes and rules, then every node with its parameter sets. "
                                    f"'{DEFAULT_MODE}' is the reference's default-mode name."),
+    Command("plan", "what a change of mode or state would do, offline: stages, calls, parameters, rules",
+            plan.add_arguments, plan.run,
+            description="Preview asking for MODE (or a lifecycle transition) of PART in MODEL, from where --from "
+                        "puts the nodes: the stages of the switching order, each node's lifecycle transitions and "
+                        "parameter changes (old -> new), the number of calls, the rules that would start or stop "
+                        "firing, or why it could not be made. Exit status 1 when it could not."),
     Command("demo", "run the MROS pilot mission tree on simulated nodes (--ros: real rclpy nodes)", demo.add_arguments,
             demo.run,
             description="The pilot mission tree (patrol, laser failure, degraded mode, low battery, recharge) on the "

@@ -106,6 +106,18 @@ class Preview:
                 "unchanged": list(self.unchanged), "rules_start": list(self.rules_start),
                 "rules_stop": list(self.rules_stop), "waits": list(self.waits)}
 
+    def summary(self, nodes: int = 4) -> str:
+        """One line: the calls, node by node (the first ``nodes`` that change), or why not."""
+        if self.refused:
+            return f"cannot be made now: {self.refused}"
+        changing = [step for step in self.steps if step.changes]
+        if not changing:
+            return "nothing to do"
+        shown = ", ".join(f"{step.node} " + "+".join(call.replace("set parameters of mode ", "set ")
+                                                     for call in step.calls) for step in changing[:nodes])
+        more = f" (+{len(changing) - nodes} more nodes)" if len(changing) > nodes else ""
+        return f"{self.calls} call{'s' if self.calls != 1 else ''}: {shown}{more}"
+
     def lines(self) -> list[str]:
         """The preview as a person reads it: a line per stage and per node's steps."""
         head = f"{self.description}: " + (f"cannot be made now: {self.refused}" if self.refused else

@@ -11,7 +11,7 @@ from model_files import bundled
 from py_trees.common import Status
 from tree_helpers import Flag, backend_requests, fresh_blackboard
 
-from sm_bt.behaviours import ChangeMode, ChangeState, FeedbackSnapshotVisitor
+from sm_bt.behaviours import CanChangeMode, ChangeMode, ChangeState, FeedbackSnapshotVisitor
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State, StateMode
 from sm_bt.sim import SimulatedSystem
@@ -38,12 +38,15 @@ def test_change_mode_on_a_system_reports_each_step_then_succeeds() -> None:
     trace = rig.tick_until_done(rig.tree(change))
 
     running = [t.feedback for t in trace if t.status is Status.RUNNING]
+    # The step in progress, and the plan previewed before the request: 8 calls, as were made.
     assert running == [
         "amcl: configure (1 of 2 steps to active); controller_server: set parameters of mode FAST; "
-        "pointcloud_to_laser: configure; laser_resender: configure (1 of 2 steps to active)",
-        "amcl: activate; controller_server: configure (1 of 2 steps to active); laser_resender: activate",
-        "controller_server: activate",
+        "pointcloud_to_laser: configure; laser_resender: configure (1 of 2 steps to active) (plan: 8 calls)",
+        "amcl: activate; controller_server: configure (1 of 2 steps to active); laser_resender: activate "
+        "(plan: 8 calls)",
+        "controller_server: activate (plan: 8 calls)",
     ]
+    assert change.plan is not None and change.plan.calls == 8
     assert trace[-1].status is Status.SUCCESS
     assert trace[-1].time == pytest.approx(0.15)
     assert change.feedback_message == "pilot is active.f_performance_mode (0.11 s)"
@@ -283,7 +286,7 @@ def test_each_new_step_of_a_mode_change_flags_a_snapshot_as_changed() -> None:
         flagged.append((visitor.changed, plain.changed, change.feedback_message))
         assert visitor.status_changed == plain.changed  # what py_trees flags, apart
         rig.clock.advance(0.05)
-    running = [f for f in flagged if f[2] and "s)" not in f[2]]  # the RUNNING ticks
+    running = [f for f in flagged if f[2] and " s)" not in f[2]]  # the RUNNING ticks
     steps = {message for _, _, message in running}
     assert len(steps) >= 2, steps  # configure, then activate: feedback moved while RUNNING
     for (mine, plain_changed, message), (_, _, before) in zip(flagged[1:], flagged, strict=False):
@@ -303,3 +306,20 @@ def test_requests_say_who_asked_the_tree_or_the_caller() -> None:
     rig.tick_until_done(tree)
     assert rig.manager.change_mode("pilot", "f_normal_mode").requester == "user"
     assert rig.manager.change_mode("pilot", "f_slow_mode", requester="operator").requester == "operator"
+
+
+def test_can_change_mode_says_whether_a_change_could_be_made_now_without_asking_for_it() -> None:
+    rig = pilot_rig()
+    can = CanChangeMode("Degraded possible?", "pilot", "f_degraded_mode")
+    tree = rig.tree(can)
+    tree.tick()
+    assert can.status is Status.SUCCESS and can.feedback_message == (
+        "8 calls: pointcloud_to_laser configure+activate, amcl set DEGRADED+configure+activate, "
+        "controller_server set DEGRADED+configure+activate")  # laser_resender stays unconfigured
+    assert rig.manager.requests() == [] and str(rig.manager.actual("pilot")) == "unconfigured"  # nothing asked
+    rig.crash("laser_resender")
+    rig.clock.advance(2.0)
+    tree.tick()
+    assert can.status is Status.FAILURE
+    assert can.feedback_message == ("cannot be made now: laser_resender is not reachable (no answer for 1.0 s "
+                                    "(crashed?))")
