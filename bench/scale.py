@@ -37,6 +37,8 @@ SIZES = (100, 250, 500, 1000, 2500, 5000, 10_000)
 QUICK_SIZES = (100, 250)
 #: Goals of the issue, by figure and N.
 REQUEST_GOALS = {1000: 0.5, 10_000: 5.0}
+#: Previewing a whole-system change (issue 32), CPU milliseconds.
+PREVIEW_GOAL_MS = {1000: 5.0, 10_000: 50.0}
 CONSTRUCTION_GOAL = {10_000: 2.0}
 EVENT_GOAL_US = {10_000: 50.0}
 FULL_OVER_EVENT_GOAL = 100.0
@@ -121,7 +123,7 @@ def _frozen() -> Iterator[None]:
         gc.unfreeze()
 
 
-def _cpu(work: Callable[[], None]) -> float:
+def _cpu(work: Callable[[], object]) -> float:
     start = time.process_time()
     work()
     return time.process_time() - start
@@ -161,6 +163,8 @@ def _from_active(loaded: Model, fault_events: int) -> dict[str, Any]:
     out: dict[str, Any] = {"construction": rig.construction}
     with _frozen():
         listener.on = True
+        # The preview of the change about to be made: the median of a few, nothing sent.
+        out["preview"] = statistics.median(_cpu(lambda: rig.manager.preview(ROOT, "FAST")) for _ in range(5))
         out["mode_change"] = _cpu(lambda: rig.drive(rig.manager.change_mode(ROOT, "FAST")))
         rig.drive(rig.manager.change_mode(ROOT, "__DEFAULT__"))
         rig.drive(rig.manager.change_mode(ROOT, "FAST"))
@@ -225,6 +229,8 @@ def run(quick: bool) -> list[Figure]:
                           ("bring_up_two", "bring-up, configure + activate")):
             figures.append(Figure("scale", f"{name}, N={nodes}", got[key], "s", REQUEST_GOALS.get(nodes),
                                   details=common))
+        figures.append(Figure("preview", f"preview of a whole-system mode change, N={nodes}", got["preview"] * 1e3,
+                              "ms", PREVIEW_GOAL_MS.get(nodes), details=common))
         figures.append(Figure("scale", f"ModeManager construction, N={nodes}", got["construction"], "s",
                               CONSTRUCTION_GOAL.get(nodes), details={"N": nodes, "gc": "as is"}))
         change = statistics.median(got["change_events"]) * 1e6

@@ -135,6 +135,7 @@ class Inference:
         #: Read-only views for the engine's hot paths (a mapping lookup, not a method call).
         self.targets: Mapping[str, StateMode] = self._targets
         self.actuals: Mapping[str, Actual] = self._actual
+        self.observations: Mapping[str, NodeObservation] = self._observations
         self._candidates: dict[tuple[str, str | None], list[str]] = {}  # (node, target mode) -> order
         for name in self._hierarchy.bottom_up:
             part = model.parts[name]
@@ -173,7 +174,9 @@ class Inference:
         return self._recompute(node)
 
     def node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> Changes:
-        self._observations[node].parameters.update(changed)
+        obs = self._observations[node]
+        # A new dict, not an update: whoever holds the old one (a preview) keeps what it saw.
+        obs.parameters = {**obs.parameters, **changed}
         return self._recompute(node)
 
     def node_vanished(self, node: str, reason: str) -> Changes:

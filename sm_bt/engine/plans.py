@@ -11,7 +11,7 @@ hierarchy is, and the work per node report is proportional to what it changes.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from typing import Protocol, cast
 
 from sm_bt.engine.drivers import Goal, NodeDriver
 from sm_bt.engine.hierarchy import child_targets
@@ -138,22 +138,28 @@ class Parallel(_Composite):
                 self._finished()
 
 
-def build_plan(model: Model, run: Run, part: str, target: StateMode,
-               only: frozenset[str] | None = None) -> tuple[Job, list[NodeJob]]:
-    """The plan taking ``part`` to ``target``, and its steps (one per node, in plan order).
+#: A plan's shape: ``(part, target, stages)``, ``stages`` ``None`` for a node, else the system's
+#: stages in order, each a list of the entries run together.
+PlanEntry = tuple[str, StateMode, "list[list[PlanEntry]] | None"]
 
-    A system's target becomes a :class:`Sequence` of its switching order's stages, each a
-    :class:`Parallel` of its parts; going to a non-active state, the parts are taken down in the
-    reverse order of the default mode's stages. A node shared by two systems gets one step, at
-    its first place (the one :func:`~sm_bt.engine.hierarchy.implied_targets` gives its target).
-    With ``only``, the plan drives those nodes alone (in the same order; other steps are left out).
+
+def plan_tree(model: Model, part: str, target: StateMode,
+              only: frozenset[str] | None = None) -> tuple[PlanEntry, list[PlanEntry]]:
+    """The shape of the plan taking ``part`` to ``target``, and its node entries in plan order.
+
+    A system's target becomes its switching order's stages, each the parts run together; going to
+    a non-active state, the parts are taken down in the reverse order of the default mode's
+    stages. A node shared by two systems appears once, at its first place (the one
+    :func:`~sm_bt.engine.hierarchy.implied_targets` gives its target). With ``only``, only those
+    nodes (in the same order; the others are left out). The one place that decides the order:
+    :func:`build_plan` makes jobs of it, previews read it.
     """
-    steps: list[NodeJob] = []
+    nodes: list[PlanEntry] = []
     seen: set[str] = set()
-    top: list[Job] = []
-    # Top-down without recursion: each entry is a part to expand and the child list its job joins
-    # (pushed reversed, so every list fills in model order).
-    stack: list[tuple[str, StateMode, list[Job]]] = [(part, target, top)]
+    top: list[PlanEntry] = []
+    # Top-down without recursion: each entry is a part to expand and the list it joins (pushed
+    # reversed, so every list fills in model order).
+    stack: list[tuple[str, StateMode, list[PlanEntry]]] = [(part, target, top)]
     while stack:
         name, value, into = stack.pop()
         if name in seen:
@@ -163,39 +169,66 @@ def build_plan(model: Model, run: Run, part: str, target: StateMode,
         if isinstance(spec, NodePart):
             if only is not None and name not in only:
                 continue
-            mode = spec.modes[value.mode or spec.default_mode] if value.state is State.ACTIVE else None
-            step = NodeJob(run, name, Goal(value.state, mode))
-            steps.append(step)
-            into.append(step)
+            entry: PlanEntry = (name, value, None)
+            nodes.append(entry)
+            into.append(entry)
             continue
         wanted = dict(child_targets(spec, value))
-        sequence = Sequence(run)
-        sequence.system = name
-        into.append(sequence)
-        pending: list[tuple[str, StateMode, list[Job]]] = []
+        stages: list[list[PlanEntry]] = []
+        into.append((name, value, stages))
+        pending: list[tuple[str, StateMode, list[PlanEntry]]] = []
         for stage in _stages(spec, value):
             members = [child for child in stage if child in wanted]
             if members:
+                together: list[PlanEntry] = []
+                stages.append(together)
+                pending.extend((child, wanted[child], together) for child in members)
+        stack.extend(reversed(pending))
+    return top[0], nodes
+
+
+def build_plan(model: Model, run: Run, part: str, target: StateMode,
+               only: frozenset[str] | None = None) -> tuple[Job, list[NodeJob]]:
+    """The plan taking ``part`` to ``target`` (:func:`plan_tree`'s shape as jobs: a
+    :class:`Sequence` of a system's stages, each a :class:`Parallel` of its parts, a
+    :class:`NodeJob` per node), and its steps in plan order."""
+    root, nodes = plan_tree(model, part, target, only)
+    made: dict[int, Job] = {}
+    steps: list[NodeJob] = []
+    for name, value, _ in nodes:
+        spec = cast(NodePart, model.parts[name])
+        mode = spec.modes[value.mode or spec.default_mode] if value.state is State.ACTIVE else None
+        step = NodeJob(run, name, Goal(value.state, mode))
+        steps.append(step)
+    for entry, step in zip(nodes, steps, strict=True):
+        made[id(entry)] = step
+    top: Job | None = None
+    stack: list[tuple[PlanEntry, _Composite | None]] = [(root, None)]
+    while stack:
+        entry, into = stack.pop()
+        stages = entry[2]
+        job: Job
+        if stages is None:
+            job = made[id(entry)]
+        else:
+            sequence = Sequence(run)
+            sequence.system = entry[0]
+            for stage in stages:
                 parallel = Parallel(run)
                 parallel.parent = sequence
                 sequence.children.append(parallel)
-                pending.extend((child, wanted[child], parallel.children) for child in members)
-        stack.extend(reversed(pending))
-    _link(top[0])
-    return top[0], steps
+                stack.extend((member, parallel) for member in reversed(stage))
+            job = sequence
+        if into is None:
+            top = job
+        else:
+            job.parent = into
+            into.children.append(job)
+    assert top is not None
+    return top, steps
 
 
 def _stages(spec: SystemPart, target: StateMode) -> tuple[tuple[str, ...], ...]:
     if target.state is State.ACTIVE:
         return spec.modes[target.mode or spec.default_mode].stages
     return tuple(reversed(spec.modes[spec.default_mode].stages))
-
-
-def _link(top: Job) -> None:
-    stack = [top]
-    while stack:
-        job = stack.pop()
-        if isinstance(job, _Composite):
-            for child in job.children:
-                child.parent = job
-                stack.append(child)

@@ -1,6 +1,6 @@
 """Previews: the plan a request would be carried out by, computed without doing anything.
 
-:func:`preview` walks the same plan a request builds (:func:`~sm_bt.engine.plans.build_plan`:
+:func:`preview` walks the same plan a request builds (:func:`~sm_bt.engine.plans.plan_tree`:
 the model's switching order, one step per node) and says for every node what its driver would
 send from where the node is: the mode's parameter set first when the node's values are not the
 mode's, then each lifecycle transition on the planned path (:class:`~sm_bt.engine.drivers.NodeDriver`
@@ -13,44 +13,62 @@ e.g. every node unconfigured), so that a model alone can be previewed offline.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 from sm_bt.engine.actual import Actual, NodeObservation, out_of_reach
-from sm_bt.engine.drivers import Goal, NodeDriver
 from sm_bt.engine.hierarchy import implied_targets
 from sm_bt.engine.inference import Inference, infer_system
 from sm_bt.engine.lifecycle import PlanError, plan
-from sm_bt.engine.plans import Job, NodeJob, Parallel, Sequence, build_plan
-from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import Model, NodePart, ParamValue, Rule, SystemPart
+from sm_bt.engine.plans import PlanEntry, plan_tree
+from sm_bt.model.states import PRIMARY_STATES, State, StateMode
+from sm_bt.model.types import Model, NodeMode, NodePart, ParamValue, Rule, SystemPart
+
+#: A parameter that changes: (name, old value or None when the node does not report it, new value).
+ParameterChange = tuple[str, "ParamValue | None", ParamValue]
 
 
-@dataclass(frozen=True)
-class ParameterChange:
-    name: str
-    old: ParamValue | None  # None: the node does not report it
-    new: ParamValue
-
-    def __str__(self) -> str:
-        return f"{self.name} {self.old!r} -> {self.new!r}"
+def describe_change(change: ParameterChange) -> str:
+    name, old, new = change
+    return f"{name} {old!r} -> {new!r}"
 
 
-@dataclass(frozen=True)
 class NodeSteps:
     """What a node's driver would send, in order (``calls``: "set parameters of mode FAST",
-    "configure", "activate"), from ``start`` to ``goal``; the values that change."""
+    "configure", "activate"), from ``start`` to ``goal``; ``parameters``: the values that change,
+    worked out when first read (a preview of 10,000 nodes makes one of these per node)."""
 
-    node: str
-    start: str  # its state (and mode) now
-    goal: str
-    calls: tuple[str, ...]
-    parameters: tuple[ParameterChange, ...] = ()
+    __slots__ = ("_changes", "_mode", "_observed", "_start", "calls", "goal", "node")
+
+    def __init__(self, node: str, start: Actual | str, goal: str, calls: tuple[str, ...],
+                 mode: NodeMode | None = None, observed: Mapping[str, ParamValue] | None = None) -> None:
+        self.node, self._start, self.goal, self.calls = node, start, goal, calls
+        self._mode, self._observed = mode, observed  # what the node reported then, when a set is sent
+        self._changes: tuple[ParameterChange, ...] | None = None
 
     @property
     def changes(self) -> bool:
         return bool(self.calls)
+
+    @property
+    def start(self) -> str:
+        """Where the node is, as a person reads it (``active.__DEFAULT__``, ``not seen yet``)."""
+        return str(self._start)
+
+    @property
+    def parameters(self) -> tuple[ParameterChange, ...]:
+        if self._changes is None:
+            self._changes = ()
+            if self._mode is not None and self._observed is not None:
+                get = self._observed.get
+                self._changes = tuple([(key, get(key), spec.value) for key, spec in self._mode.parameters.items()
+                                       if get(key) != spec.value])
+        return self._changes
+
+    def __repr__(self) -> str:
+        return f"NodeSteps({self.node!r}, {self.start!r} -> {self.goal!r}: {', '.join(self.calls)})"
 
 
 @dataclass(frozen=True)
@@ -76,7 +94,7 @@ class Preview:
     part: str
     target: str
     description: str
-    plan: SystemSteps | NodeSteps | None
+    shape: PlanEntry = field(repr=False)  # the plan's shape (plans.plan_tree): ``plan`` is made of it when read
     steps: tuple[NodeSteps, ...]
     unchanged: tuple[str, ...] = ()
     rules_start: tuple[str, ...] = ()
@@ -92,17 +110,22 @@ class Preview:
     def possible(self) -> bool:
         return not self.refused
 
+    @functools.cached_property
+    def plan(self) -> SystemSteps | NodeSteps:
+        """The stages (a system's, each the parts run together) or the node's steps."""
+        return _tree(self.shape, {step.node: step for step in self.steps})
+
     def as_json(self) -> dict[str, Any]:
         def steps_json(entry: SystemSteps | NodeSteps) -> dict[str, Any]:
             if isinstance(entry, NodeSteps):
                 return {"node": entry.node, "start": entry.start, "goal": entry.goal, "calls": list(entry.calls),
-                        "parameters": [{"name": c.name, "old": c.old, "new": c.new} for c in entry.parameters]}
+                        "parameters": [{"name": name, "old": old, "new": new} for name, old, new in entry.parameters]}
             return {"system": entry.system, "target": entry.target,
                     "stages": [[steps_json(member) for member in stage] for stage in entry.stages]}
 
         return {"part": self.part, "target": self.target, "description": self.description,
                 "possible": self.possible, "refused": self.refused, "calls": self.calls,
-                "plan": steps_json(self.plan) if self.plan is not None else None,
+                "plan": steps_json(self.plan),
                 "unchanged": list(self.unchanged), "rules_start": list(self.rules_start),
                 "rules_stop": list(self.rules_stop), "waits": list(self.waits)}
 
@@ -129,7 +152,7 @@ class Preview:
             if isinstance(entry, NodeSteps):
                 if entry.changes:
                     out.append(f"{pad}{entry.node}: {entry.start} -> {entry.goal}: {', '.join(entry.calls)}")
-                    out.extend(f"{pad}    {change}" for change in entry.parameters)
+                    out.extend(f"{pad}    {describe_change(change)}" for change in entry.parameters)
                 else:
                     out.append(f"{pad}{entry.node}: {entry.goal} already")
                 return
@@ -140,7 +163,7 @@ class Preview:
                 for member in stage:
                     walk(member, depth + (2 if len(entry.stages) > 1 else 1))
 
-        if self.plan is not None and not self.refused:
+        if not self.refused:
             walk(self.plan, 1)
         out.extend(f"  waits: {text}" for text in self.waits)
         out.extend(f"  rule {name} would fire" for name in self.rules_start)
@@ -154,6 +177,9 @@ class Configuration:
 
     def __init__(self, inference: Inference) -> None:
         self.inference = inference
+        #: Read-only views, for a preview's loop over every node.
+        self.observations: Mapping[str, NodeObservation] = inference.observations
+        self.actuals: Mapping[str, Actual] = inference.actuals
 
     def observation(self, node: str) -> NodeObservation:
         return self.inference.observation(node)
@@ -193,80 +219,62 @@ def nodes_of(model: Model, targets: Mapping[str, StateMode]) -> dict[str, StateM
     return found
 
 
-class _Offline:
-    """A plan's run that never runs: :func:`build_plan` only needs one to make its jobs."""
-
-    active = False
-
-    def defer(self, action: Callable[[], None]) -> None:
-        pass
-
-    def driver(self, node: str) -> NodeDriver:
-        raise AssertionError("a preview drives nothing")
-
-    def plan_done(self) -> None:
-        pass
-
-    def plan_failed(self, reason: str) -> None:
-        pass
-
-
-def node_steps(part: NodePart, obs: NodeObservation, goal: Goal) -> tuple[NodeSteps, str]:
-    """What the node's driver would send to take it from ``obs`` to ``goal`` (as
-    :meth:`NodeDriver.advance` does), and why it could not ("" when it can)."""
-    start = _describe(part, obs)
-    calls: list[str] = []
-    changes: tuple[ParameterChange, ...] = ()
-    mode = goal.mode if goal.state is State.ACTIVE else None
+def node_steps(name: str, obs: NodeObservation, state: State, mode: NodeMode | None,
+               start: Actual | str) -> tuple[NodeSteps, str]:
+    """What the node's driver would send to take it from ``obs`` to ``state`` (in ``mode`` when
+    active), as :meth:`NodeDriver.advance` does, and why it could not ("" when it can); ``start``:
+    where the node is, as a person reads it."""
+    calls: tuple[str, ...] = ()
+    observed = None
     if mode is not None and not mode.matches(obs.parameters):
-        calls.append(f"set parameters of mode {mode.name}")
-        changes = tuple(ParameterChange(name, obs.parameters.get(name), value) for name, value in mode.values().items()
-                        if obs.parameters.get(name) != value)
+        calls = (mode.set_label,)
+        observed = obs.parameters  # never changed in place (Inference.node_parameters): what it was now
     why = ""
-    if obs.state.is_primary and obs.state is not goal.state:
+    if obs.state is not state and obs.state in PRIMARY_STATES:
         try:
-            calls.extend(edge.transition.label for edge in plan(obs.state, goal.state))
+            calls += tuple([edge.transition.label for edge in plan(obs.state, state)])
         except PlanError as error:
-            why = f"{part.name}: {error}"
-    return NodeSteps(part.name, start, str(goal), tuple(calls), changes), why
+            why = f"{name}: {error}"
+    goal = _LABELS[state] if mode is None else mode.active_label
+    return NodeSteps(name, start, goal, calls, mode, observed), why
 
 
-def _describe(part: NodePart, obs: NodeObservation) -> str:
-    if not obs.seen:
-        return "not seen yet"
-    if obs.state is not State.ACTIVE:
-        return obs.state.label
-    mode = next((name for name, spec in part.modes.items() if spec.matches(obs.parameters)), None)
-    return f"active.{mode}" if mode is not None else "active (no mode)"
+_LABELS = {state: state.label for state in State}
 
 
 def preview(model: Model, config: Configuration, part: str, target: StateMode, description: str,
             refused: str = "") -> Preview:
     """The preview of taking ``part`` to ``target`` (an active mode resolved) from ``config``;
     ``refused``: a reason found before planning (an invalid transition)."""
-    implied = implied_targets(model, part, target)
-    root, jobs = build_plan(model, _Offline(), part, target)
+    root, nodes = plan_tree(model, part, target)
     steps: dict[str, NodeSteps] = {}
     why: list[str] = [refused] if refused else []
     waits: list[str] = []
-    for job in jobs:
-        obs = config.observation(job.node)
-        spec = model.parts[job.node]
-        assert isinstance(spec, NodePart)
-        reach = out_of_reach(job.node, obs, StateMode(job.goal.state))
-        if reach:
-            why.append(reach)
-        elif not obs.seen:
-            waits.append(f"{job.node} to appear")
-        elif not obs.state.is_primary:
-            waits.append(f"{job.node} to end its transition ({obs.state.label})")
-        steps[job.node], cannot = node_steps(spec, obs, job.goal)
+    parts, observations, actuals = model.parts, config.observations, config.actuals
+    active, primary = State.ACTIVE, PRIMARY_STATES
+    for name, value, _ in nodes:
+        spec = cast(NodePart, parts[name])
+        obs = observations[name]
+        reach = ""
+        if obs.gone or not obs.seen or obs.state not in primary:
+            reach = out_of_reach(name, obs, value)
+            if reach:
+                why.append(reach)
+            elif not obs.seen:
+                waits.append(f"{name} to appear")
+            elif obs.state is not State.FINALIZED:
+                waits.append(f"{name} to end its transition ({obs.state.label})")
+        state = value.state
+        mode = spec.modes[value.mode or spec.default_mode] if state is active else None
+        steps[name], cannot = node_steps(name, obs, state, mode, actuals[name] if obs.seen else "not seen yet")
         if cannot and not reach:
             why.append(cannot)
-    unchanged = tuple(name for name, value in implied if _there(config.actual(name), value, model))
-    start, stop = _rules(model, config, dict(implied))
-    return Preview(part, str(target), description, _tree(root, steps, dict(implied)), tuple(steps.values()),
-                   unchanged, start, stop, "; ".join(why), tuple(waits))
+    targets = _targets(root)
+    unchanged = tuple(name for name, value in targets.items()
+                      if (not steps[name].calls if name in steps else _there(actuals[name], value, model)))
+    start_rules, stop_rules = _rules(model, config, targets)
+    return Preview(part, str(target), description, root, tuple(steps.values()), unchanged,
+                   start_rules, stop_rules, "; ".join(why), tuple(waits))
 
 
 def _there(actual: Actual, wanted: StateMode, model: Model) -> bool:
@@ -274,16 +282,31 @@ def _there(actual: Actual, wanted: StateMode, model: Model) -> bool:
     return actual.is_(StateMode(wanted.state, mode))
 
 
-def _tree(root: Job, steps: Mapping[str, NodeSteps], targets: Mapping[str, StateMode]) -> SystemSteps | NodeSteps:
-    """The plan's jobs as the preview's stages (systems by their ``system`` name)."""
-    if isinstance(root, NodeJob):
-        return steps[root.node]
-    assert isinstance(root, Sequence)
-    stages = []
-    for stage in root.children:
-        assert isinstance(stage, Parallel)
-        stages.append(tuple(_tree(member, steps, targets) for member in stage.children))
-    return SystemSteps(root.system, str(targets[root.system]), tuple(stages))
+def _entries(root: PlanEntry) -> list[PlanEntry]:
+    """Every entry of a plan's shape, each system before the entries below it (no recursion: a
+    hierarchy may be deep)."""
+    order: list[PlanEntry] = []
+    stack = [root]
+    while stack:
+        entry = stack.pop()
+        order.append(entry)
+        for stage in entry[2] or ():
+            stack.extend(stage)
+    return order
+
+
+def _targets(root: PlanEntry) -> dict[str, StateMode]:
+    return {entry[0]: entry[1] for entry in _entries(root)}
+
+
+def _tree(root: PlanEntry, steps: Mapping[str, NodeSteps]) -> SystemSteps | NodeSteps:
+    """The plan's shape as the preview's stages."""
+    made: dict[int, SystemSteps | NodeSteps] = {}
+    for entry in reversed(_entries(root)):  # parts below first
+        name, value, stages = entry
+        made[id(entry)] = steps[name] if stages is None else SystemSteps(
+            name, str(value), tuple(tuple(made[id(member)] for member in stage) for stage in stages if stage))
+    return made[id(root)]
 
 
 def _rules(model: Model, config: Configuration, targets: Mapping[str, StateMode]) -> tuple[tuple[str, ...],

@@ -10,6 +10,7 @@ resolved states.
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -128,6 +129,16 @@ class NodeMode:
                 inexact.append(spec)
         object.__setattr__(self, "_exact", tuple(exact))
         object.__setattr__(self, "_inexact", tuple(inexact))
+
+    @functools.cached_property
+    def active_label(self) -> str:
+        """How a preview names the node in this mode (made once, when first asked)."""
+        return f"active.{self.name}"
+
+    @functools.cached_property
+    def set_label(self) -> str:
+        """How a preview names the call that sets this mode's parameters."""
+        return f"set parameters of mode {self.name}"
 
     def values(self) -> dict[str, ParamValue]:
         """The full parameter set to send (atomically) when switching a node to this mode."""

@@ -46,13 +46,23 @@ def test_a_mode_switch_shows_its_stages_and_each_parameters_old_and_new_value() 
         ["pointcloud_to_laser"], ["amcl", "controller_server"], ["laser_resender"]]
     controller = next(step for step in preview.steps if step.node == "controller_server")
     assert controller.calls == ("set parameters of mode DEGRADED",)
-    assert [str(change) for change in controller.parameters][:2] == ["FollowPath.max_vel_x 0.3 -> 0.1",
-                                                                     "FollowPath.max_speed_xy 0.3 -> 0.1"]
+    assert controller.parameters[:2] == (("FollowPath.max_vel_x", 0.3, 0.1), ("FollowPath.max_speed_xy", 0.3, 0.1))
     assert preview.as_json()["plan"]["stages"][2][0] == {
         "node": "laser_resender", "start": "active.__DEFAULT__", "goal": "unconfigured",
         "calls": ["deactivate", "cleanup"], "parameters": []}
     already = system.manager.preview("pilot", "__DEFAULT__")
     assert already.target == "active.__DEFAULT__"
+
+
+def test_a_preview_keeps_the_values_it_saw_when_the_node_changes_later() -> None:
+    system = SimulatedSystem(bundled("pilot"))
+    system.finish(system.manager.change_mode("pilot", "f_normal_mode"))
+    preview = system.manager.preview("controller_server", "DEGRADED")
+    system.set_parameter("controller_server", "FollowPath.max_vel_x", 0.7)  # someone else, afterwards
+    system.run(0.1)
+    assert system.manager.observation("controller_server").parameters["FollowPath.max_vel_x"] == 0.7
+    (steps,) = preview.steps
+    assert steps.parameters[0] == ("FollowPath.max_vel_x", 0.3, 0.1)
 
 
 def test_a_change_that_would_be_refused_says_why_in_the_same_words() -> None:
