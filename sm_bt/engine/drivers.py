@@ -29,13 +29,15 @@ log = logging.getLogger("sm_bt.manager")
 
 @dataclass(frozen=True)
 class Goal:
-    """What a plan step asks of a node: a lifecycle state and, for ``active``, a node mode."""
+    """What a plan step asks of a node: a lifecycle state and, for ``active``, a node mode (a
+    rollback also gives the values a node had in another state: they are set whatever the state)."""
 
     state: State
     mode: NodeMode | None = None
 
     def __str__(self) -> str:
-        return self.state.label if self.mode is None else f"{self.state.label}.{self.mode.name}"
+        return self.state.label if self.mode is None or self.state is not State.ACTIVE else \
+            f"{self.state.label}.{self.mode.name}"
 
 
 class Owner(Protocol):
@@ -191,7 +193,7 @@ class NodeDriver:
                 or self._parameters_set is not None or self._outdated:
             return
         goal = owner.goal
-        mode = goal.mode if goal.state is State.ACTIVE else None
+        mode = goal.mode
         if mode is not None and not mode.matches(obs.parameters):
             if self._sets >= _MAX_SETS:
                 owner.failed(f"{self.node}: the parameters of mode {mode.name} were set {self._sets} times, "
@@ -289,7 +291,7 @@ class NodeDriver:
     def _at(goal: Goal, obs: NodeObservation) -> bool:
         if obs.state is not goal.state:
             return False
-        return goal.state is not State.ACTIVE or goal.mode is None or goal.mode.matches(obs.parameters)
+        return goal.mode is None or goal.mode.matches(obs.parameters)
 
     @staticmethod
     def _now(goal: Goal, obs: NodeObservation) -> str:

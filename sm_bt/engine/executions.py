@@ -25,9 +25,10 @@ from sm_bt.engine.events import EventKind
 from sm_bt.engine.hierarchy import implied_targets
 from sm_bt.engine.ledger import Ledger
 from sm_bt.engine.lifecycle import Transition
-from sm_bt.engine.plans import NodeJob, Sequence, build_plan
+from sm_bt.engine.plans import Job, NodeJob, Sequence, build_plan
 from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
+from sm_bt.engine.rollback import MODE_POLICY, Before, check_policy, reverse_plan, snapshot
 from sm_bt.engine.serialiser import Serialiser
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import NodePart
@@ -48,7 +49,7 @@ class Execution:
 
     def __init__(self, executions: Executions, request: Request, scope: frozenset[str],
                  previous_targets: dict[str, tuple[StateMode | None, Origin | None]],
-                 continuation: bool = False) -> None:
+                 continuation: bool = False, rolls_back: Execution | None = None) -> None:
         self.executions = executions
         self.request = request
         self.scope = scope
@@ -57,8 +58,20 @@ class Execution:
         self.active = True
         self.planned = False  # every step reached its goal; waiting for the part's actual to confirm
         self.timer: TimerHandle | None = None
-        self.root, self.steps = build_plan(executions.model, self, request.part, request.target,
-                                           scope if continuation else None)
+        self.limit = 0.0  # its timeout, seconds
+        #: With the rollback policy: where its nodes were when it began.
+        self.before: dict[str, Before] = {}
+        #: The failed execution this one puts back (its nodes' goals are where they were).
+        self.rolls_back = rolls_back
+        self.failure = ""  # why it failed, while it is being rolled back
+        self.root: Job
+        self.steps: list[NodeJob]
+        if rolls_back is not None:
+            goals = {name: rolls_back.before[name].goal(name, rolls_back.request.id) for name in scope}
+            self.root, self.steps = reverse_plan(self, rolls_back.root, goals)
+        else:
+            self.root, self.steps = build_plan(executions.model, self, request.part, request.target,
+                                               scope if continuation else None)
 
     # -- the plan's run (see plans.Run) ---------------------------------------------------------
 
@@ -75,7 +88,7 @@ class Execution:
 
     def plan_failed(self, reason: str) -> None:
         if self.active:
-            self.executions.finish(self, False, reason)
+            self.executions.fail(self, reason)
 
     # -- life -----------------------------------------------------------------------------------
 
@@ -119,9 +132,12 @@ class Executions:
 
     def __init__(self, ledger: Ledger, divergences: Divergences, reactions: Reactions,
                  drivers: Mapping[str, NodeDriver], serialiser: Serialiser, clock: Clock, *,
-                 request_timeout: float, renew_budgets: Callable[[Iterable[str]], None]) -> None:
+                 request_timeout: float, renew_budgets: Callable[[Iterable[str]], None],
+                 on_failure: str = "stay") -> None:
         self.model = ledger.model
         self.request_timeout = request_timeout
+        #: The failure policy of a user request that names none (:mod:`sm_bt.engine.rollback`).
+        self.on_failure = check_policy(on_failure)
         self._ledger = ledger
         self._inference = ledger.inference
         self._divergences = divergences
@@ -157,9 +173,11 @@ class Executions:
     # -- admission ---------------------------------------------------------------------------------
 
     def start(self, part: str, target: StateMode, description: str, origin: Origin,
-              timeout: float | None, transition: Transition | None = None, *, requester: str | None = None) -> Request:
+              timeout: float | None, transition: Transition | None = None, *, requester: str | None = None,
+              on_failure: str | None = None) -> Request:
         """Carry out a request for ``target`` of ``part`` (an active mode resolved); the request
-        that preempts what it overlaps, or a refused one."""
+        that preempts what it overlaps, or a refused one. ``on_failure``: a user request's failure
+        policy (default: the manager's)."""
         if self._serialiser.closed:  # detached from the backend: nothing it starts could ever end
             return self.refuse(part, description, CLOSED, requester)
         implied = implied_targets(self.model, part, target)
@@ -176,10 +194,15 @@ class Executions:
         preempted = [e for e in self._executions.values() if e.scope & scope or e.request.part == part]
         for execution in preempted:
             self.finish(execution, False, f"preempted by request #{request.id} ({description})")
+        if origin is Origin.USER:
+            request.on_failure = check_policy(on_failure or self.on_failure)
+        before = snapshot(self.model, scope, self._inference.observations) if request.on_failure == "rollback" else {}
         previous = self._assign_targets(implied, origin, transition)
         if origin is Origin.USER:
             self._renew_budgets(previous)
-        self._run(Execution(self, request, scope, previous), timeout)
+        execution = Execution(self, request, scope, previous)
+        execution.before = before
+        self._run(execution, timeout)
         # The last request wins where it drives; elsewhere what the preempted ones asked for stands.
         for execution in preempted:
             if execution.scope - scope:
@@ -214,6 +237,7 @@ class Executions:
         self._executions[request.id] = execution
         self._divergences.busy(execution.scope, +1)
         limit = self.request_timeout if timeout is None else timeout
+        execution.limit = limit
         execution.timer = self._clock.call_later(limit, lambda: self._timed_out(execution, limit))
         self._ledger.emit(EventKind.REQUEST, request.part, f"#{request.id} {request.description} started",
                           request=request)
@@ -239,6 +263,9 @@ class Executions:
         """The plan is done: succeed once every part the request is about is at its target (the
         request's part at the request's target; a continuation's nodes at theirs)."""
         request = execution.request
+        if execution.rolls_back is not None:  # its steps checked each node's state and values
+            self.finish(execution, True, "")
+            return
         off = []
         for part in request.parts:
             wanted = self._inference.target(part) if execution.continuation else request.target
@@ -258,6 +285,65 @@ class Executions:
     def finish(self, execution: Execution, succeeded: bool, reason: str) -> None:
         if not execution.active:
             return
+        self._close(execution)
+        if execution.rolls_back is not None:
+            self._end(execution.request, succeeded, reason)
+            failed = execution.rolls_back
+            self._end(failed.request, False, self._rolled_back(failed, succeeded, reason))
+            return
+        self._end(execution.request, succeeded, reason)
+
+    def fail(self, execution: Execution, reason: str) -> None:
+        """``execution``'s request failed by itself (a step, its timeout): what its failure policy
+        says happens (:mod:`sm_bt.engine.rollback`)."""
+        if not execution.active:
+            return
+        request = execution.request
+        if request.on_failure == "rollback" and execution.before:
+            self._roll_back(execution, reason)
+        elif request.on_failure.startswith(MODE_POLICY):
+            mode = request.on_failure[len(MODE_POLICY):]
+            self.finish(execution, False, f"{reason}; {request.part} is asked for mode {mode} (on_failure)")
+            self.start(request.part, StateMode(State.ACTIVE, mode), f"change_mode {request.part} {mode} "
+                       f"(on_failure of #{request.id})", Origin.USER, None, requester=request.requester,
+                       on_failure="stay")
+        else:
+            self.finish(execution, False, reason)
+
+    def _roll_back(self, execution: Execution, reason: str) -> None:
+        """Put back every node ``execution`` moved, in the reverse of its plan's order."""
+        self._close(execution)
+        for part, (target, chosen_by) in execution.previous_targets.items():
+            self._ledger.set_target(part, target)
+            self._divergences.chosen(part, chosen_by)
+        execution.failure = reason
+        observations = self._inference.observations
+        # Every node it began to drive (a call may still be in flight: its new owner waits for the
+        # outcome), and any other that is not where it was; the ones out of reach cannot be.
+        started = {step.node for step in execution.steps if step.started}
+        back = frozenset(name for name, before in execution.before.items()
+                         if (name in started or not before.holds(observations[name])) and observations[name].reachable)
+        if not back:
+            self._end(execution.request, False, self._rolled_back(execution, True, ""))
+            return
+        request = execution.request
+        rollback = Request(request.part, request.target, f"roll back #{request.id}", Origin.RECOVERY, self._clock.now(),
+                           requester="rollback", parts=tuple(sorted(back)))
+        log.info("request #%d %s started [rollback]", rollback.id, rollback.description)
+        # As long as the request itself was given.
+        self._run(Execution(self, rollback, back, {}, continuation=True, rolls_back=execution), execution.limit)
+
+    def _rolled_back(self, execution: Execution, succeeded: bool, reason: str) -> str:
+        """The failed request's reason once its rollback ended."""
+        observations = self._inference.observations
+        left = sorted(name for name, before in execution.before.items() if not before.holds(observations[name]))
+        if succeeded and not left:
+            return f"rolled back: {execution.failure}"
+        what = reason or f"not back where it was: {', '.join(left)}"
+        return f"rollback failed ({what}): {execution.failure}"
+
+    def _close(self, execution: Execution) -> None:
+        """``execution`` is over: no further steps, and no longer in progress."""
         execution.stop()
         request = execution.request
         self._executions.pop(request.id, None)
@@ -269,8 +355,10 @@ class Executions:
                     del self._confirming[part]
                     self._ledger.waiting.discard(part)
         self._divergences.busy(execution.scope, -1)
+
+    def _end(self, request: Request, succeeded: bool, reason: str) -> None:
         now = self._clock.now()
-        if request.origin is not Origin.USER:
+        if request.origin is not Origin.USER and request.requester != "rollback":
             self._reactions.finished(request.part, succeeded, reason)
         outcome = f"succeeded in {now - request.created:.2f} s" if succeeded else f"failed: {reason}"
         (log.info if succeeded else log.warning)("request #%d %s %s", request.id, request.description, outcome)
@@ -291,4 +379,4 @@ class Executions:
     def _timed_out(self, execution: Execution, limit: float) -> None:
         with self._serialiser:
             if execution.active:
-                self.finish(execution, False, f"timed out after {limit:g} s ({execution.stall()})")
+                self.fail(execution, f"timed out after {limit:g} s ({execution.stall()})")

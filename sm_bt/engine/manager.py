@@ -49,6 +49,7 @@ from sm_bt.engine.preview import Configuration, Preview, preview
 from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.responses import Responses
+from sm_bt.engine.rollback import MODE_POLICY, check_policy
 from sm_bt.engine.serialiser import Serialiser
 from sm_bt.engine.settling import Settling
 from sm_bt.engine.snapshots import PartSnapshot
@@ -76,12 +77,14 @@ class ModeManager:
     failures; it is whole again once the part stayed on target for ``recovery_window`` seconds
     (a node that comes back and fails again at once still runs out). After that the part is
     *given up* and its divergence says why. ``rules=False``/``recovery=False`` switch those
-    reactions off.
+    reactions off. ``on_failure`` is what a request that fails by itself leaves behind, unless it
+    says otherwise: ``"stay"`` (the nodes stay where the failure left them), ``"rollback"`` (they
+    are put back where they were) or ``"mode:<name>"`` (:mod:`~sm_bt.engine.rollback`).
     """
 
     def __init__(self, model: Model, backend: Backend, *, request_timeout: float = REQUEST_TIMEOUT,
                  grace_period: float = 2.0, recovery_attempts: int = 3, recovery_window: float = 60.0,
-                 rules: bool = True, recovery: bool = True) -> None:
+                 rules: bool = True, recovery: bool = True, on_failure: str = "stay") -> None:
         self.model = model
         self.backend = backend
         self.clock = backend.clock
@@ -98,7 +101,8 @@ class ModeManager:
         self._responses = Responses(self._ledger, self._divergences, self._reactions, self._serial, self.clock)
         renew = self._responses.renew_budgets
         self._executions = Executions(self._ledger, self._divergences, self._reactions, self._drivers, self._serial,
-                                      self.clock, request_timeout=request_timeout, renew_budgets=renew)
+                                      self.clock, request_timeout=request_timeout, renew_budgets=renew,
+                                      on_failure=on_failure)
         self._reports = NodeReports(self._ledger, self._divergences, self._executions, self._hierarchy,
                                     self._drivers, self._serial, self.clock, renew_budgets=renew)
         self._serial.work = Settling(self._serial, self._divergences, self._responses, self._executions, self.clock)
@@ -110,6 +114,10 @@ class ModeManager:
         return self._executions.request_timeout
 
     # -- settings ---------------------------------------------------------------------------------
+
+    @property
+    def on_failure(self) -> str:
+        return self._executions.on_failure
 
     @property
     def grace_period(self) -> float:
@@ -231,20 +239,22 @@ class ModeManager:
 
     # -- commands ---------------------------------------------------------------------------------
 
-    def change_mode(self, part: str, mode: str, *, timeout: float | None = None, requester: str = "user") -> Request:
+    def change_mode(self, part: str, mode: str, *, timeout: float | None = None, requester: str = "user",
+                    on_failure: str | None = None) -> Request:
         """Ask for ``part`` (system or node) to be active in ``mode`` (``__DEFAULT__`` names its
         default mode). Returns at once. :class:`RequestError` for a part or mode the model does not
         have, or an empty mode name. ``requester`` says who asks, for logs and narratives
-        (:attr:`Request.requester`: sm_bt's behaviours say ``"tree"``)."""
+        (:attr:`Request.requester`: sm_bt's behaviours say ``"tree"``); ``on_failure``: this
+        request's failure policy (default: the manager's)."""
         if not mode:
             raise RequestError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
                                "for the default mode)")
         with self._serial:
             return self._request(part, StateMode(State.ACTIVE, mode), f"change_mode {part} {mode}", timeout,
-                                 requester)
+                                 requester, on_failure)
 
     def change_state(self, part: str, transition: Transition | str | int, *,
-                     timeout: float | None = None, requester: str = "user") -> Request:
+                     timeout: float | None = None, requester: str = "user", on_failure: str | None = None) -> Request:
         """Ask for a lifecycle transition of ``part`` (system or node): ``"configure"``,
         ``"activate"``, ``Transition.DEACTIVATE``, ... Returns at once. A settled part must be in
         a state the transition is valid from (as a lifecycle node requires), or already in its
@@ -252,7 +262,7 @@ class ModeManager:
         transition is accepted and its goal state becomes the new target. Activation keeps the
         last mode asked for. :class:`RequestError` for a part the model does not have, or a
         transition that does not exist or cannot be requested; one not valid from where the part
-        is now is a refused request."""
+        is now is a refused request. ``on_failure``: as :meth:`change_mode`'s."""
         with self._serial:
             self._check_part(part)
             description, target, resolved, refusal = self._state_target(
@@ -260,7 +270,7 @@ class ModeManager:
             if refusal:
                 return self._executions.refuse(part, description, refusal, requester)
             return self._executions.start(part, target, description, Origin.USER, timeout, resolved,
-                                          requester=requester)
+                                          requester=requester, on_failure=self._policy(part, on_failure))
 
     def preview(self, part: str, mode: str, *, from_: Configuration | None = None) -> Preview:
         """The plan ``change_mode(part, mode)`` would be carried out by now, without doing anything:
@@ -313,7 +323,7 @@ class ModeManager:
         return description, StateMode(goal, mode), resolved, refusal
 
     def change_to(self, part: str, target: StateMode | str, *, timeout: float | None = None,
-                  requester: str = "user") -> Request:
+                  requester: str = "user", on_failure: str | None = None) -> Request:
         """Ask for ``part`` to reach ``target`` (``"active.FAST"``, ``"inactive"``, a
         :class:`StateMode`), whatever it is in now: the plan takes every lifecycle step needed.
         Used to put a part back where it was (for instance after holding a mode). Returns at once.
@@ -328,7 +338,7 @@ class ModeManager:
             if wanted.state not in (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE):
                 raise RequestError(f"{description}: {wanted.state.label} is not a state to ask for "
                                    "(unconfigured, inactive or active)")
-            return self._request(part, wanted, description, timeout, requester)
+            return self._request(part, wanted, description, timeout, requester, on_failure)
 
     def subscribe(self, callback: Observer, part: str | Iterable[str] | None = None,
                   kinds: Iterable[EventKind] | None = None) -> Subscription:
@@ -354,11 +364,30 @@ class ModeManager:
     # -- requests -----------------------------------------------------------------------------------
 
     def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None,
-                 requester: str) -> Request:
+                 requester: str, on_failure: str | None = None) -> Request:
         """Start a user request for ``wanted`` (an active mode resolved: ``__DEFAULT__`` is the
         default mode); :class:`RequestError` with the part's real names for one it does not have."""
         wanted = self._mode_target(part, wanted, description)
-        return self._executions.start(part, wanted, description, Origin.USER, timeout, requester=requester)
+        return self._executions.start(part, wanted, description, Origin.USER, timeout, requester=requester,
+                                      on_failure=self._policy(part, on_failure))
+
+    def _policy(self, part: str, on_failure: str | None) -> str | None:
+        """``on_failure`` checked: a policy, and a safe mode the part has (:class:`RequestError`)."""
+        if on_failure is None:
+            return None
+        try:
+            check_policy(on_failure)
+        except ValueError as error:
+            raise RequestError(str(error)) from None
+        if on_failure.startswith(MODE_POLICY):
+            mode = on_failure[len(MODE_POLICY):]
+            resolved = resolve_mode(self.model.parts[part], mode)
+            if resolved is None:
+                modes = self.available_modes(part)
+                raise RequestError(f"on_failure={on_failure!r}: {part} has no mode {mode!r}"
+                                   f"{did_you_mean(mode, modes)} (modes: {', '.join(modes)})")
+            return f"{MODE_POLICY}{resolved}"
+        return on_failure
 
     def _mode_target(self, part: str, wanted: StateMode, description: str) -> StateMode:
         """``wanted`` with an active mode resolved (``__DEFAULT__``: the default mode);

@@ -51,6 +51,9 @@ class Request:
         #: Refused as a whole (unknown part or mode, a node out of reach, ...): nothing was changed,
         #: no target, no request in flight. A refused request is done and failed.
         self.refused = False
+        #: What happens when it fails by itself: "stay", "rollback" or "mode:<name>"
+        #: (:mod:`sm_bt.engine.rollback`; a user request's, the manager's default unless given).
+        self.on_failure = "stay"
         self._withdraw = withdraw
         self._progress: Callable[[], str] | None = None  # the step in progress, while running
         self._callbacks: list[Callable[[Request], None]] = []
