@@ -6,7 +6,8 @@ Controls: ``RecoveryNode``, ``PipelineSequence``, ``RoundRobin`` (Nav2), ``IfThe
 ``RetryUntilSuccessful``, ``KeepRunningUntilFailure``, ``ForceSuccess``, ``ForceFailure``
 (BehaviorTree.CPP; ``Inverter`` is py_trees' own). Each is a py_trees ports class registered
 under its BehaviorTree.CPP tag. Where BehaviorTree.CPP *halts* a child, these stop it
-(``INVALID``); time is ``time.monotonic`` (the ``Timeout`` decorator's clock).
+(``INVALID``). Time is the tree's clock, ``tree.setup(clock=...)`` (an object with ``now()``: a
+run on simulated nodes passes its virtual clock), else ``time.monotonic``.
 """
 
 from __future__ import annotations
@@ -297,7 +298,22 @@ class RetryUntilSuccessful(_Wrapper, tag="RetryUntilSuccessful"):
             _halt([self.decorated])
 
 
-class Delay(_Wrapper, tag="Delay"):
+class _Timed(_Wrapper, register=False):
+    """A decorator that measures time on the tree's clock (``setup(clock=...)``)."""
+
+    def __init__(self, name: str, child: Behaviour, **kwargs: Any) -> None:
+        super().__init__(name, child, **kwargs)
+        self._clock: Any = None
+
+    def setup(self, **kwargs: Any) -> None:
+        super().setup(**kwargs)
+        self._clock = kwargs.get("clock", self._clock)
+
+    def now(self) -> float:
+        return float(self._clock.now()) if self._clock is not None else time.monotonic()
+
+
+class Delay(_Timed, tag="Delay"):
     """RUNNING for ``delay_msec`` milliseconds without ticking the child, then the child's status."""
 
     def __init__(self, name: str, child: Behaviour, delay_msec: float = 0, **kwargs: Any) -> None:
@@ -309,17 +325,18 @@ class Delay(_Wrapper, tag="Delay"):
         self.started = 0.0
 
     def initialise(self) -> None:
-        self.started = time.monotonic()
+        self.started = self.now()
 
     def work(self) -> Work:
-        if time.monotonic() - self.started < self.delay:
-            self.feedback_message = f"waiting {self.delay - (time.monotonic() - self.started):.1f} s"
+        waited = self.now() - self.started
+        if waited < self.delay:
+            self.feedback_message = f"waiting {self.delay - waited:.1f} s"
             return Status.RUNNING
         self.feedback_message = ""
         return (yield from self._tick_child())
 
 
-class RateController(_Wrapper, tag="RateController"):
+class RateController(_Timed, tag="RateController"):
     """Nav2's: ticks the child at most ``hz`` times a second: on the first tick, while the child
     runs, and once a period passed since it last succeeded; RUNNING in between (also when ticked
     on after a success: the period runs from that success). The child's SUCCESS is SUCCESS, its
@@ -337,11 +354,11 @@ class RateController(_Wrapper, tag="RateController"):
     def initialise(self) -> None:
         if self.status == Status.SUCCESS:
             return  # ticked on after its success (as in a PipelineSequence): the period goes on
-        self.started = time.monotonic()
+        self.started = self.now()
         self.first = True
 
     def work(self) -> Work:
-        now = time.monotonic()
+        now = self.now()
         if self.first or self.decorated.status == Status.RUNNING or now - self.started >= self.period:
             self.first = False
             status = yield from self._tick_child()

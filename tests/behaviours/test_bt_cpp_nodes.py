@@ -265,3 +265,15 @@ def test_an_inverter_in_xml_is_py_trees_inverter_around_its_child(tmp_path: Path
     clock.now = 1.5
     tree.tick()
     assert root.status is S  # the stand-in failed after its second of RUNNING
+
+
+def test_delay_and_rate_controller_keep_the_trees_clock_a_virtual_one_too(tmp_path: Path) -> None:
+    """A run on simulated nodes passes its virtual clock: a Delay of 2 s ends after 2 s of it
+    (regression: it waited 2 s of the wall clock, while the virtual one ran on for hours)."""
+    path = tmp_path / "delayed.xml"
+    path.write_text('<root main_tree_to_execute="M"><BehaviorTree ID="M">'
+                    '<Delay delay_msec="2000"><AlwaysSuccess/></Delay></BehaviorTree></root>')
+    rig = SimulatedSystem(bundled("pilot"))
+    root = load_tree(path, manager=rig.manager)
+    ticks = rig.tick_until_done(rig.tree(root), step=0.1, timeout=5.0)
+    assert ticks[-1].status is S and 2.0 <= ticks[-1].time <= 2.1
