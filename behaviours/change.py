@@ -16,6 +16,7 @@ from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.preview import Preview
 from sm_bt.engine.requests import Request
+from sm_bt.engine.rollback import MODE_POLICY, check_policy
 from sm_bt.model.types import Model
 
 #: The lifecycle transitions a tree may ask for, by label.
@@ -26,11 +27,21 @@ class _RequestBehaviour(ManagerBehaviour, register=False):
     """Common life of a behaviour that owns one manager request."""
 
     def __init__(self, name: str, part: str, timeout: float | None, *, manager: ModeManager | None = None,
-                 **kwargs: Any) -> None:
+                 on_failure: str | None = None, **kwargs: Any) -> None:
         super().__init__(name, manager=manager, **kwargs)
         self.part = part
         self.timeout = seconds(name, timeout)
+        try:
+            #: What the request leaves behind if it fails: "stay", "rollback", "mode:<name>"
+            #: (``None``: the manager's default).
+            self.on_failure = check_policy(on_failure) if on_failure is not None else None
+        except ValueError as error:
+            raise ValueError(f"{name}: {error}") from None
         self.request: Request | None = None
+
+    def _check_policy(self, model: Model) -> None:
+        if self.on_failure is not None and self.on_failure.startswith(MODE_POLICY):
+            self._check_mode(model, self.part, self.on_failure[len(MODE_POLICY):])
         #: The change as previewed before it was asked for (``ChangeMode``), or ``None``.
         self.plan: Preview | None = None
 
@@ -79,12 +90,14 @@ class ChangeMode(_RequestBehaviour):
     * ``terminate``: withdraw the request when interrupted while RUNNING
 
     ``timeout`` (seconds of the manager's clock) bounds the whole change; ``None`` takes the
-    manager's ``request_timeout``. An unknown part or mode is an error at ``setup``.
+    manager's ``request_timeout``. ``on_failure``: what a failed change leaves behind ("stay",
+    "rollback", "mode:<name>"; ``None``: the manager's default). An unknown part or mode is an
+    error at ``setup``.
     """
 
     def __init__(self, name: str, part: str, mode: str, timeout: float | None = None, *,
-                 manager: ModeManager | None = None, **kwargs: Any) -> None:
-        super().__init__(name, part, timeout, manager=manager, **kwargs)
+                 manager: ModeManager | None = None, on_failure: str | None = None, **kwargs: Any) -> None:
+        super().__init__(name, part, timeout, manager=manager, on_failure=on_failure, **kwargs)
         require_mode_name(name, part, mode)
         self.mode = mode
 
@@ -94,10 +107,12 @@ class ChangeMode(_RequestBehaviour):
 
     def check_model(self, model: Model) -> None:
         self._check_mode(model, self.part, self.mode)
+        self._check_policy(model)
 
     def _make_request(self, manager: ModeManager) -> Request:
         self.plan = manager.preview(self.part, self.mode)
-        return manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER)
+        return manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER,
+                                   on_failure=self.on_failure)
 
 
 class CanChangeMode(ManagerBehaviour):
@@ -145,8 +160,8 @@ class ChangeState(_RequestBehaviour):
     """
 
     def __init__(self, name: str, part: str, transition: str | Transition, timeout: float | None = None, *,
-                 manager: ModeManager | None = None, **kwargs: Any) -> None:
-        super().__init__(name, part, timeout, manager=manager, **kwargs)
+                 manager: ModeManager | None = None, on_failure: str | None = None, **kwargs: Any) -> None:
+        super().__init__(name, part, timeout, manager=manager, on_failure=on_failure, **kwargs)
         label = transition.label if isinstance(transition, Transition) else transition
         if label not in TRANSITIONS:
             raise ValueError(f"{name}: cannot request transition {label!r} (one of: {', '.join(TRANSITIONS)})")
@@ -158,9 +173,11 @@ class ChangeState(_RequestBehaviour):
 
     def check_model(self, model: Model) -> None:
         self._check_part(model, self.part)
+        self._check_policy(model)
 
     def _make_request(self, manager: ModeManager) -> Request:
-        return manager.change_state(self.part, self.transition, timeout=self.timeout, requester=REQUESTER)
+        return manager.change_state(self.part, self.transition, timeout=self.timeout, requester=REQUESTER,
+                                    on_failure=self.on_failure)
 
 
 __all__ = ["TRANSITIONS", "CanChangeMode", "ChangeMode", "ChangeState"]

@@ -45,12 +45,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="give up on a request after this long (default 30)")
     parser.add_argument("--recovery-attempts", type=positive_int, default=3,
                         help="restore attempts per node within a minute before giving up (default 3)")
+    parser.add_argument("--on-failure", type=_policy, default="stay", metavar="POLICY",
+                        help="what a request that fails leaves behind: stay (the nodes where the failure left them; "
+                             "the default), rollback (every node it moved put back where it was) or mode:NAME (that "
+                             "mode of the request's part asked for)")
     parser.add_argument("--no-rules", action="store_true", help="do not apply the model's rules")
     parser.add_argument("--no-recovery", action="store_true", help="do not restore nodes that left their target")
     parser.add_argument("--lenient", action="store_true",
                         help="accept what the reference accepts where sm_bt is stricter")
     parser.add_argument("--log-level", choices=tuple(LOG_LEVELS), default="info",
                         help="log to stderr from this level on (default info)")
+
+
+def _policy(text: str) -> str:
+    from sm_bt.engine.rollback import check_policy
+
+    try:
+        return check_policy(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def startup_lines(model: Model) -> list[str]:
@@ -76,7 +89,7 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
         runtime = RosRuntime(model, node_name=args.node_name, manager_options={
             "grace_period": args.grace_period, "request_timeout": args.request_timeout,
             "recovery_attempts": args.recovery_attempts, "rules": not args.no_rules,
-            "recovery": not args.no_recovery})
+            "recovery": not args.no_recovery, "on_failure": args.on_failure})
     except (RosUnavailable, ImportError) as error:
         raise RosMissing(str(error)) from None
     # The model and the manager's tables live as long as the process: keep them out of the garbage

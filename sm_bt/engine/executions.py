@@ -303,6 +303,10 @@ class Executions:
             self._roll_back(execution, reason)
         elif request.on_failure.startswith(MODE_POLICY):
             mode = request.on_failure[len(MODE_POLICY):]
+            if mode not in self.model.parts[request.part].modes:  # a manager-wide safe mode this part lacks
+                self.finish(execution, False, f"{reason}; {request.part} has no mode {mode} (on_failure): left "
+                                              "as it is")
+                return
             self.finish(execution, False, f"{reason}; {request.part} is asked for mode {mode} (on_failure)")
             self.start(request.part, StateMode(State.ACTIVE, mode), f"change_mode {request.part} {mode} "
                        f"(on_failure of #{request.id})", Origin.USER, None, requester=request.requester,
