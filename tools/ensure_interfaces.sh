@@ -3,14 +3,15 @@
 #
 #   tools/ensure_interfaces.sh [VENV]     VENV: default $VIRTUAL_ENV, else <repo>/.venv
 #
-# Packages, in order: system_modes_msgs (the system_modes interface) and py_trees_ros_interfaces
-# (the snapshot streams that py-trees-tree-watcher/-viewer read). Neither is on a package index.
+# Packages: system_modes_msgs (the system_modes interface), sm_bt_msgs (sm_bt's own services:
+# PreviewChange) and py_trees_ros_interfaces (the snapshot streams that py-trees-tree-watcher/-viewer
+# read). None is on a package index.
 # The venv must already hold the ROS 2 Jazzy runtime (pip install -c constraints.txt -e '.[ros]').
 # Paths for each package, fastest first:
 #   up to date  (~0.5 s)  the venv's stamp matches the source hash and every type imports and loads
 #                         its C typesupport;
 #   cached      (~1 s)    $cache/wheels/<package>-<hash>/ holds the wheel: pip install --no-deps it;
-#   build       (~40 s system_modes_msgs, ~80 s py_trees_ros_interfaces) pip wheel --no-deps
+#   build       (~40 s system_modes_msgs, ~20 s sm_bt_msgs, ~80 s py_trees_ros_interfaces) pip wheel --no-deps
 #                         (scikit-build-core + the pinned Jazzy build wheels in pip's isolated build
 #                         env; needs gcc/g++ and the package index; cmake comes from PyPI when missing).
 # <hash> covers interfaces/<package> (package.xml, CMakeLists.txt, pyproject.toml,
@@ -218,10 +219,10 @@ PY
   echo "$name: installed $(rel "$whl") into $venv"
 }
 
-# Both at once: a cold build is mostly pip setting up its build env and CMake's single-threaded steps,
+# All at once: a cold build is mostly pip setting up its build env and CMake's single-threaded steps,
 # so the two overlap well on two cores. Each runs in a subshell of its own (its lock, its exit status).
 pids=()
-for package in system_modes_msgs py_trees_ros_interfaces; do
+for package in system_modes_msgs sm_bt_msgs py_trees_ros_interfaces; do
   ensure "$package" &
   pids+=($!)
 done

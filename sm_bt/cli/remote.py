@@ -52,6 +52,9 @@ def add_mode_arguments(parser: argparse.ArgumentParser) -> None:
     put.add_argument("mode", metavar="MODE", help="one of the part's modes (`sm-bt mode list PART`), or __DEFAULT__")
     put.add_argument("--wait", action="store_true",
                      help="wait until the manager confirms the part is in MODE; print how long it took")
+    put.add_argument("--dry-run", action="store_true",
+                     help="ask sm-bt manager what the change would do, and do nothing: the plan (stages, calls, "
+                          "parameters), or why it would be refused (exit 1)")
     for child in (get, listed):
         _common(child)
     _common(put, waits=True)
@@ -129,6 +132,10 @@ def run_mode(args: argparse.Namespace) -> int:
 
     def put(client: Any) -> int:
         client.check_mode(part, args.mode)
+        if args.dry_run:
+            possible, lines = client.preview_change(part, mode=args.mode)
+            print("\n".join(lines))
+            return 0 if possible else 1
         if not client.change_mode(part, args.mode):
             raise CliError(f"the manager refused mode {args.mode!r} for {part} (its log says why)")
         if not args.wait:

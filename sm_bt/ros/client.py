@@ -257,6 +257,21 @@ class ModeClient:
         if mode not in modes and mode != "__DEFAULT__":
             raise UnknownName(f"{part} has no mode {mode!r}{_closest(mode, modes, 'modes')}")
 
+    def preview_change(self, part: str, mode: str = "", transition: str = "") -> tuple[bool, list[str]]:
+        """What ``sm-bt manager`` would do for a change of ``mode`` (or ``transition``) of ``part``,
+        without doing it: whether it could be made, and the plan's lines (sm_bt's own
+        ``/{part}/preview_change``; the reference's manager has none: :class:`ManagerUnreachable`
+        says so)."""
+        from sm_bt_msgs.srv import PreviewChange
+
+        try:
+            response = self._call(PreviewChange, part, "preview_change",
+                                  PreviewChange.Request(mode=mode, transition=transition))
+        except ManagerUnreachable as error:
+            raise ManagerUnreachable(f"{error} (a preview needs sm-bt manager: the reference's manager has none)") \
+                from None
+        return bool(response.possible), list(response.lines)
+
     def change_mode(self, part: str, mode: str) -> bool:
         """Ask for ``mode``; whether the manager accepted the request (not that it is done)."""
         from system_modes_msgs.srv import ChangeMode

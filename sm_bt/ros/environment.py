@@ -19,8 +19,8 @@ INSTALL_HINT = ("install the ROS 2 extra: `pip install -c constraints.txt -e '.[
 
 
 class RosUnavailable(Error, RuntimeError):
-    """rclpy or system_modes_msgs cannot be imported in this environment, or the ROS 2 settings in
-    it are not valid (see :func:`check_settings`)."""
+    """rclpy or an interface package (system_modes_msgs, sm_bt_msgs) cannot be imported in this
+    environment, or the ROS 2 settings in it are not valid (see :func:`check_settings`)."""
 
 
 #: rcl accepts these domain ids (the DDS port mapping leaves room for no more).
@@ -75,9 +75,11 @@ def describe_discovery() -> str:
 
 
 def require_ros() -> None:
-    """Raise :class:`RosUnavailable` with the fix when rclpy or system_modes_msgs is missing."""
+    """Raise :class:`RosUnavailable` with the fix when rclpy or an interface package
+    (system_modes_msgs, sm_bt_msgs) is missing."""
     try:
         import rclpy  # noqa: F401
+        from sm_bt_msgs.srv import PreviewChange  # noqa: F401
         from system_modes_msgs.srv import ChangeMode  # noqa: F401
     except ImportError as error:
         raise RosUnavailable(f"ROS 2 is not available here ({error}): {INSTALL_HINT}") from None

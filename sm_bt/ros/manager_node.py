@@ -5,6 +5,8 @@ For every part of the model, with the reference's names and types (a drop-in for
 
 * systems: ``/{system}/change_state``, ``get_state``, ``get_available_states`` (lifecycle_msgs);
 * every part: ``/{part}/change_mode``, ``get_mode``, ``get_available_modes`` (system_modes_msgs);
+* every part, sm_bt's own: ``/{part}/preview_change`` (sm_bt_msgs/PreviewChange): what a change
+  of mode or state would do, without doing it (``sm-bt mode set --dry-run``);
 * topics ``/{part}/mode_request_info`` and ``/{part}/transition_request_info`` (when a part's
   target changes), ``/{system}/transition_event`` and ``/{part}/mode_event`` (when its inferred
   state or mode changes).
@@ -43,6 +45,7 @@ unless the application configures logging (``sm-bt manager`` does, on stderr).
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from collections.abc import Callable
@@ -53,6 +56,7 @@ from lifecycle_msgs.msg import TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sm_bt_msgs.srv import PreviewChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 
@@ -137,6 +141,7 @@ class ModeManagerServer:
         service(ChangeMode, "change_mode", lambda req, res: self._change_mode(part, req, res))
         service(GetMode, "get_mode", lambda req, res: self._get_mode(part, res))
         service(GetAvailableModes, "get_available_modes", lambda req, res: self._get_available_modes(part, res))
+        service(PreviewChange, "preview_change", lambda req, res: self._preview_change(part, req, res))
         self._mode_events[part] = publisher(ModeEvent, "mode_event")
         self._mode_requests[part] = publisher(ModeEvent, "mode_request_info")
         self._transition_requests[part] = publisher(TransitionEvent, "transition_request_info")
@@ -184,6 +189,19 @@ class ModeManagerServer:
         response.success = not handle.refused
         if not response.success:  # the manager has logged why (WARNING)
             log.debug("<- change_state of %s (%s) answered false: %s", part, transition, handle.reason)
+        return response
+
+    def _preview_change(self, part: str, request: Any, response: Any) -> Any:
+        log.debug("-> callback preview_change of %s: %r %r", part, request.mode, request.transition)
+        try:
+            preview = (self._manager.preview_state(part, request.transition) if request.transition
+                       else self._manager.preview(part, request.mode or DEFAULT_MODE))
+        except RequestError as error:  # a name the model does not have
+            response.possible, response.refused = False, str(error)
+            return response
+        response.possible, response.refused, response.calls = preview.possible, preview.refused, preview.calls
+        response.lines = preview.lines()
+        response.json = json.dumps(preview.as_json())
         return response
 
     def _told(self, part: str, handle: Request) -> None:
@@ -278,6 +296,8 @@ def _failure_response(kind: Any) -> Callable[[Any], None]:
     def fill(response: Any) -> None:
         if kind is ChangeMode or kind is ChangeState:
             response.success = False
+        elif kind is PreviewChange:
+            response.possible, response.refused = False, "the manager failed to preview it (its log says why)"
         elif kind is GetMode:
             response.current_mode = "unknown"
         elif kind is GetState:

@@ -255,3 +255,27 @@ def test_a_transition_is_sent_with_its_id_and_its_label(
         assert sm_bt(capsys, "state", "set", "pilot", transition, "--timeout", "5") == (
             0, f"pilot: {transition} accepted\n", "")
     assert received == [(1, "configure"), (3, "activate"), (4, "deactivate"), (2, "cleanup"), (7, "shutdown")]
+
+
+def test_a_dry_run_asks_the_manager_what_a_change_would_do_and_changes_nothing(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    manager = start_manager()
+    node_processes("pilot")
+    manager.ready()
+    deadline = time.monotonic() + 15.0
+    while sm_bt(capsys, "state", "get", "pilot")[1] != "pilot: unconfigured\n" and time.monotonic() < deadline:
+        time.sleep(0.2)
+    code, out, err = sm_bt(capsys, "mode", "set", "pilot", "f_normal_mode", "--dry-run")
+    assert (code, err) == (0, "")
+    assert out.splitlines() == [
+        "change_mode pilot f_normal_mode: 7 calls", "  pilot -> active.f_normal_mode",
+        "    amcl: unconfigured -> active.__DEFAULT__: configure, activate",
+        "    controller_server: unconfigured -> active.__DEFAULT__: configure, activate",
+        "    pointcloud_to_laser: unconfigured -> inactive: configure",
+        "    laser_resender: unconfigured -> active.__DEFAULT__: configure, activate"]
+    assert sm_bt(capsys, "state", "get", "pilot")[1] == "pilot: unconfigured\n"  # nothing was done
+    assert not manager.lines("change_mode pilot f_normal_mode")
+    # A node's change, through the same service of the node's part.
+    code, out, _ = sm_bt(capsys, "mode", "set", "amcl", "__DEFAULT__", "--dry-run")
+    assert code == 0 and out.startswith("change_mode amcl __DEFAULT__: 2 calls")
