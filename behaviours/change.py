@@ -38,12 +38,13 @@ class _RequestBehaviour(ManagerBehaviour, register=False):
         except ValueError as error:
             raise ValueError(f"{name}: {error}") from None
         self.request: Request | None = None
+        #: The change's plan, as previewed from where the parts were when it was asked for
+        #: (``ChangeMode``), or ``None``.
+        self.plan: Preview | None = None
 
     def _check_policy(self, model: Model) -> None:
         if self.on_failure is not None and self.on_failure.startswith(MODE_POLICY):
             self._check_mode(model, self.part, self.on_failure[len(MODE_POLICY):])
-        #: The change as previewed before it was asked for (``ChangeMode``), or ``None``.
-        self.plan: Preview | None = None
 
     def _make_request(self, manager: ModeManager) -> Request | None:
         """Ask the manager (it returns at once); ``None`` when there is nothing to ask for."""
@@ -82,8 +83,8 @@ class _RequestBehaviour(ManagerBehaviour, register=False):
 class ChangeMode(_RequestBehaviour):
     """Put ``part`` (a system or a node) in ``mode``, active.
 
-    * ``initialise``: preview the change (``plan``: :meth:`ModeManager.preview`), then request
-      it (``ModeManager.change_mode``)
+    * ``initialise``: request the change (``ModeManager.change_mode``); ``plan``: its preview,
+      from where the parts were (:meth:`Request.preview`)
     * ``update``: RUNNING while in progress (feedback: the step in progress, and the plan's
       calls), SUCCESS when the manager confirms the part's inferred actual state is
       ``active.<mode>``, FAILURE with the manager's reason otherwise
@@ -110,9 +111,10 @@ class ChangeMode(_RequestBehaviour):
         self._check_policy(model)
 
     def _make_request(self, manager: ModeManager) -> Request:
-        self.plan = manager.preview(self.part, self.mode)
-        return manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER,
-                                   on_failure=self.on_failure)
+        request = manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER,
+                                      on_failure=self.on_failure)
+        self.plan = request.preview()
+        return request
 
 
 class CanChangeMode(ManagerBehaviour):

@@ -26,6 +26,7 @@ from sm_bt.engine.hierarchy import implied_targets
 from sm_bt.engine.ledger import Ledger
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.plans import Job, NodeJob, Sequence, build_plan
+from sm_bt.engine.preview import Configuration, preview
 from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.rollback import MODE_POLICY, Before, check_policy, reverse_plan, snapshot
@@ -196,6 +197,9 @@ class Executions:
             self.finish(execution, False, f"preempted by request #{request.id} ({description})")
         if origin is Origin.USER:
             request.on_failure = check_policy(on_failure or self.on_failure)
+        # Where the parts are now, kept for the request's preview (made only if asked for).
+        kept = Configuration(self._inference).kept(name for name, _ in implied)
+        request._preview = lambda: preview(self.model, kept, part, target, description)
         before = snapshot(self.model, scope, self._inference.observations) if request.on_failure == "rollback" else {}
         previous = self._assign_targets(implied, origin, transition)
         if origin is Origin.USER:

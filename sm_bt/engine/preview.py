@@ -14,7 +14,8 @@ e.g. every node unconfigured), so that a model alone can be previewed offline.
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping
+from collections import ChainMap
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -172,23 +173,41 @@ class Preview:
 
 
 class Configuration:
-    """What a preview reads: node observations, targets and actuals (the manager's inference, or
-    one made by :func:`configuration`)."""
+    """What a preview reads: node observations, targets and actuals (the manager's inference, one
+    made by :func:`configuration`, or what :meth:`kept` kept of one)."""
 
-    def __init__(self, inference: Inference) -> None:
+    def __init__(self, inference: Inference, observations: Mapping[str, NodeObservation] | None = None,
+                 actuals: Mapping[str, Actual] | None = None,
+                 targets: Mapping[str, StateMode | None] | None = None) -> None:
         self.inference = inference
-        #: Read-only views, for a preview's loop over every node.
-        self.observations: Mapping[str, NodeObservation] = inference.observations
-        self.actuals: Mapping[str, Actual] = inference.actuals
+        #: Read-only views, for a preview's loop over every node (a kept configuration's own first).
+        self.observations: Mapping[str, NodeObservation] = (
+            ChainMap(dict(observations), inference.observations) if observations is not None  # type: ignore[arg-type]
+            else inference.observations)
+        self.actuals: Mapping[str, Actual] = (ChainMap(dict(actuals), inference.actuals)  # type: ignore[arg-type]
+                                              if actuals is not None else inference.actuals)
+        self._targets = dict(targets or {})
+
+    def kept(self, parts: Iterable[str]) -> Configuration:
+        """These parts as they are now, kept for a preview made later (the rest read live)."""
+        inference, observations, actuals, targets = self.inference, {}, {}, {}
+        for name in parts:
+            if name in inference.observations:
+                obs = inference.observations[name]
+                # A copy: state and gone change in place; parameters are replaced, never updated.
+                observations[name] = NodeObservation(obs.seen, obs.state, obs.parameters, obs.lifecycle, obs.gone)
+            actuals[name] = inference.actuals[name]
+            targets[name] = inference.target(name)
+        return Configuration(inference, observations, actuals, targets)
 
     def observation(self, node: str) -> NodeObservation:
-        return self.inference.observation(node)
+        return self.observations[node]
 
     def actual(self, part: str) -> Actual:
-        return self.inference.actual(part)
+        return self.actuals[part]
 
     def target(self, part: str) -> StateMode | None:
-        return self.inference.target(part)
+        return self._targets[part] if part in self._targets else self.inference.target(part)
 
 
 def configuration(model: Model, nodes: Mapping[str, StateMode] | None = None,

@@ -12,7 +12,8 @@ A frame is a plain dict (JSON-ready), format 2::
      "events": [{"time", "kind", "part", "text", ...}, ...]}  # the manager's events since the frame before, if any
 
 A request's events also carry ``request`` (its number), ``done`` and ``ok`` (the timeline draws
-its band). Parts' actual and target changes are not events here: the ``modes`` table says them.
+its band); its start, ``plan``: the lines of its preview (:meth:`Request.preview`, shown with its
+band and in the list). Parts' actual and target changes are not events here: the ``modes`` table says them.
 :mod:`sm_bt.view.recording` writes frames to a file, reads them back (format 1, a whole tree in
 every frame, too) and folds a delta into the key frame before it.
 
@@ -46,6 +47,8 @@ _COLOURS = {"sequence": "#FFA500", "selector": "#00FFFF", "parallel": "#FFFF00",
             "decorator": "#DDDDDD", "behaviour": "#555555"}
 #: Manager events that go into frames; the rest (actual, target) only mark the table as due.
 _LISTED = frozenset({EventKind.DIVERGENCE, EventKind.REQUEST, EventKind.RULE, EventKind.FAILED})
+#: Lines of a request's plan a frame carries (the rest is summed up).
+PLAN_LINES = 40
 #: Ticks between looks at the whole tree (its shape, every behaviour, the mode table).
 RESCAN = 200
 
@@ -123,6 +126,11 @@ class FrameMaker:
             entry.update(request=request.id, done=request.done, ok=request.succeeded if request.done else None)
             if not request.done:
                 entry["text"] += f" [{request.requester}]"  # who asked: tree, user, rule, recovery
+                plan = request.preview()
+                if plan is not None and plan.possible:  # shown with the request's band
+                    lines = plan.lines()
+                    entry["plan"] = lines[:PLAN_LINES] + ([f"… {len(lines) - PLAN_LINES} more lines"]
+                                                         if len(lines) > PLAN_LINES else [])
         with self._events_lock:
             self._events.append(entry)
             self._table_due = True

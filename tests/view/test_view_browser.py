@@ -208,6 +208,16 @@ def test_long_part_and_mode_names_wrap_instead_of_being_cut() -> None:
     _assert_nothing_cut(report, "long names")
 
 
+def test_a_requests_plan_is_shown_with_it_in_the_list_and_on_its_band(replay: ViewServer) -> None:
+    dom = _browse(f"{replay.url}?at=17.6")
+    item = re.search(r'<li class="request[^"]*"[^>]*title="(change_mode pilot f_degraded_mode: [^"]*)"[^>]*>([^<]*)</li>',
+                     dom)
+    assert item, "the degraded-mode request's plan is on its list item"
+    assert "(3 calls)" in item.group(2) and "amcl: active.__DEFAULT__ -&gt; active.DEGRADED" in item.group(1)
+    assert "<title>#4 change_mode pilot f_degraded_mode started [tree]\nchange_mode pilot f_degraded_mode: 3 calls" \
+        in dom, "and on its band's tooltip"
+
+
 def test_the_page_follows_the_scrubber_to_the_end_of_a_replay(replay: ViewServer, recording: list[Frame]) -> None:
     dom = _browse(replay.url + "?check", screenshot=SHOTS / "replay-end-1280x800.png")
     assert 'data-ended="true"' in dom, "the replay's end reached the page"

@@ -38,7 +38,7 @@ var timeline = (function () {
       var request = requests[event.request];
       if (!request) {
         request = requests[event.request] = {part: event.part, from: event.time, to: null, ok: null,
-                                             text: event.text};
+                                             text: event.text + (event.plan ? "\n" + event.plan.join("\n") : "")};
       }
       if (event.done) { request.to = event.time; request.ok = event.ok; request.text += "; " + event.text; }
     });

@@ -112,6 +112,10 @@ function showModes(state) {
 function addEvents(frame, index) {
   (frame.events || []).forEach(function (event) {
     var item = text("li", event.time.toFixed(2) + " s  " + event.text, event.kind);
+    if (event.plan) {  // a request's plan: its first line in the list, all of it on hover
+      item.textContent += "  (" + event.plan[0].split(": ").pop() + ")";
+      item.title = event.plan.join("\n");
+    }
     item.dataset.index = String(index);
     eventList.appendChild(item);
     listed.push({index: index, item: item});
