@@ -36,11 +36,14 @@ from typing import Any
 
 from bench.figures import Figure
 from bench.ros_baseline import SYSTEM, TIMEOUT, BaselineProcess, freeze_garbage, node_values, wait_for
+from sm_bt.engine.events import EventKind
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.states import State
 from sm_bt.ros.node_process import stop_process
 
 P1_GOAL, P2_GOAL_MS, IDLE_GOAL, VANISH_GOAL = 1.25, 10.0, 1.0, 1.0
+#: A rollback of a failed change, against the change itself (issue 32).
+ROLLBACK_GOAL = 1.5
 
 
 def model_text(nodes: int) -> str:
@@ -126,6 +129,7 @@ def run(quick: bool) -> list[Figure]:
             wait_for(lambda: all(manager.observation(n).reachable for n in names), "the manager sees every node")
             freeze_garbage()  # as sm-bt manager does once it is up
             figures += _p1_p2(baseline, manager, values, bring_ups, switches, count)
+            figures += _rollback(runtime, manager, names, 4 if quick else 20)
             figures.append(Figure("idle", f"manager process CPU, {count} idle nodes", idle,
                                   "% of a core", IDLE_GOAL, details={"window_s": idle_window}))
             began = time.perf_counter()
@@ -140,6 +144,37 @@ def run(quick: bool) -> list[Figure]:
                 baseline.close()
             process.stop()
     return figures
+
+
+def _rollback(runtime: Any, manager: ModeManager, names: list[str], turns: int) -> list[Figure]:
+    """A mode switch of every node, and the same switch failing on one node's parameter set and
+    rolled back: the rollback request's own time against the switch's (each request's elapsed,
+    as the manager times it), medians of ``turns`` each."""
+    rollbacks: list[float] = []
+    subscription = manager.subscribe(lambda event: rollbacks.append(event.request.elapsed or 0.0)
+                                     if event.request is not None and event.request.requester == "rollback"
+                                     and event.request.done else None, kinds=[EventKind.REQUEST])
+    switched: list[float] = []
+    try:
+        for turn in range(turns):
+            _confirmed(manager, lambda: manager.change_mode(SYSTEM, "__DEFAULT__"))
+            request = manager.change_mode(SYSTEM, "FAST")
+            wait_for(lambda asked=request: asked.done, "the switch ends")
+            switched.append(request.elapsed or 0.0)
+            _confirmed(manager, lambda: manager.change_mode(SYSTEM, "__DEFAULT__"))
+            failing = names[turn % len(names)]
+            runtime.set_parameters(failing, {"sim.reject_parameters": "busy"})
+            failed = manager.change_mode(SYSTEM, "FAST", on_failure="rollback")
+            wait_for(lambda asked=failed: asked.done, "the failed switch is rolled back")
+            runtime.set_parameters(failing, {"sim.reject_parameters": ""})
+            if not failed.reason.startswith("rolled back: "):
+                raise RuntimeError(f"not rolled back: {failed.reason}")
+    finally:
+        subscription.cancel()
+    mine, base = statistics.median(rollbacks), statistics.median(switched)
+    return [Figure("rollback", f"rollback of a failed {len(names)}-node mode switch / the switch", mine / base, "x",
+                   ROLLBACK_GOAL, details={"rollback_ms": round(mine * 1e3, 1), "switch_ms": round(base * 1e3, 1),
+                                           "turns": turns})]
 
 
 def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, dict[str, dict[str, Any]]],

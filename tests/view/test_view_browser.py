@@ -210,8 +210,8 @@ def test_long_part_and_mode_names_wrap_instead_of_being_cut() -> None:
 
 def test_a_requests_plan_is_shown_with_it_in_the_list_and_on_its_band(replay: ViewServer) -> None:
     dom = _browse(f"{replay.url}?at=17.6")
-    item = re.search(r'<li class="request[^"]*"[^>]*title="(change_mode pilot f_degraded_mode: [^"]*)"[^>]*>([^<]*)</li>',
-                     dom)
+    item = re.search(r'<li class="request[^"]*"[^>]*title="(change_mode pilot f_degraded_mode: [^"]*)"[^>]*>'
+                     r'([^<]*)</li>', dom)
     assert item, "the degraded-mode request's plan is on its list item"
     assert "(3 calls)" in item.group(2) and "amcl: active.__DEFAULT__ -&gt; active.DEGRADED" in item.group(1)
     assert "<title>#4 change_mode pilot f_degraded_mode started [tree]\nchange_mode pilot f_degraded_mode: 3 calls" \
