@@ -23,6 +23,7 @@ the manager's.
 
 from __future__ import annotations
 
+import functools
 import os
 import statistics
 import subprocess
@@ -146,6 +147,10 @@ def run(quick: bool) -> list[Figure]:
     return figures
 
 
+def _done(request: Any) -> bool:
+    return bool(request.done)
+
+
 def _rollback(runtime: Any, manager: ModeManager, names: list[str], turns: int) -> list[Figure]:
     """A mode switch of every node, and the same switch failing on one node's parameter set and
     rolled back: the rollback request's own time against the switch's (each request's elapsed,
@@ -159,13 +164,13 @@ def _rollback(runtime: Any, manager: ModeManager, names: list[str], turns: int) 
         for turn in range(turns):
             _confirmed(manager, lambda: manager.change_mode(SYSTEM, "__DEFAULT__"))
             request = manager.change_mode(SYSTEM, "FAST")
-            wait_for(lambda asked=request: asked.done, "the switch ends")
+            wait_for(functools.partial(_done, request), "the switch ends")
             switched.append(request.elapsed or 0.0)
             _confirmed(manager, lambda: manager.change_mode(SYSTEM, "__DEFAULT__"))
             failing = names[turn % len(names)]
             runtime.set_parameters(failing, {"sim.reject_parameters": "busy"})
             failed = manager.change_mode(SYSTEM, "FAST", on_failure="rollback")
-            wait_for(lambda asked=failed: asked.done, "the failed switch is rolled back")
+            wait_for(functools.partial(_done, failed), "the failed switch is rolled back")
             runtime.set_parameters(failing, {"sim.reject_parameters": ""})
             if not failed.reason.startswith("rolled back: "):
                 raise RuntimeError(f"not rolled back: {failed.reason}")
