@@ -25,7 +25,7 @@ from sm_bt.engine.events import EventKind
 from sm_bt.engine.hierarchy import implied_targets
 from sm_bt.engine.ledger import Ledger
 from sm_bt.engine.lifecycle import Transition
-from sm_bt.engine.plans import Job, NodeJob, Sequence, build_plan
+from sm_bt.engine.plans import Job, NodeJob, Sequence, Shapes, build_plan
 from sm_bt.engine.preview import Configuration, preview
 from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
@@ -72,7 +72,7 @@ class Execution:
             self.root, self.steps = reverse_plan(self, rolls_back.root, goals)
         else:
             self.root, self.steps = build_plan(executions.model, self, request.part, request.target,
-                                               scope if continuation else None)
+                                               scope if continuation else None, executions.shapes)
 
     # -- the plan's run (see plans.Run) ---------------------------------------------------------
 
@@ -139,6 +139,8 @@ class Executions:
         self.request_timeout = request_timeout
         #: The failure policy of a user request that names none (:mod:`sm_bt.engine.rollback`).
         self.on_failure = check_policy(on_failure)
+        #: Plan shapes, shared with the manager's previews.
+        self.shapes = Shapes(self.model)
         self._ledger = ledger
         self._inference = ledger.inference
         self._divergences = divergences
@@ -199,7 +201,7 @@ class Executions:
             request.on_failure = check_policy(on_failure or self.on_failure)
         # Where the parts are now, kept for the request's preview (made only if asked for).
         kept = Configuration(self._inference).kept(name for name, _ in implied)
-        request._preview = lambda: preview(self.model, kept, part, target, description)
+        request._preview = lambda: preview(self.model, kept, part, target, description, shapes=self.shapes)
         before = snapshot(self.model, scope, self._inference.observations) if request.on_failure == "rollback" else {}
         previous = self._assign_targets(implied, origin, transition)
         if origin is Origin.USER:

@@ -297,7 +297,8 @@ class ModeManager:
 
     def _preview(self, part: str, target: StateMode, description: str, refusal: str,
                  from_: Configuration | None) -> Preview:
-        return preview(self.model, from_ or Configuration(self._inference), part, target, description, refusal)
+        return preview(self.model, from_ or Configuration(self._inference), part, target, description, refusal,
+                       shapes=self._executions.shapes)
 
     def _state_target(self, part: str, transition: Transition | str | int, current: State,
                       moving: bool) -> tuple[str, StateMode, Transition, str]:

@@ -23,7 +23,7 @@ from sm_bt.engine.actual import Actual, NodeObservation, out_of_reach
 from sm_bt.engine.hierarchy import implied_targets
 from sm_bt.engine.inference import Inference, infer_system
 from sm_bt.engine.lifecycle import PlanError, plan
-from sm_bt.engine.plans import PlanEntry, plan_tree
+from sm_bt.engine.plans import PlanEntry, Shapes, plan_tree
 from sm_bt.model.states import PRIMARY_STATES, State, StateMode
 from sm_bt.model.types import Model, NodeMode, NodePart, ParamValue, Rule, SystemPart
 
@@ -262,10 +262,11 @@ _LABELS = {state: state.label for state in State}
 
 
 def preview(model: Model, config: Configuration, part: str, target: StateMode, description: str,
-            refused: str = "") -> Preview:
+            refused: str = "", shapes: Shapes | None = None) -> Preview:
     """The preview of taking ``part`` to ``target`` (an active mode resolved) from ``config``;
-    ``refused``: a reason found before planning (an invalid transition)."""
-    root, nodes = plan_tree(model, part, target)
+    ``refused``: a reason found before planning (an invalid transition); ``shapes``: where the
+    plan's shape may already be."""
+    root, nodes = shapes.get(part, target) if shapes is not None else plan_tree(model, part, target)
     steps: dict[str, NodeSteps] = {}
     why: list[str] = [refused] if refused else []
     waits: list[str] = []
