@@ -53,7 +53,8 @@ stress: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
 	SM_BT_TESTS_NEED_ALL=1 SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests/support \
 		$(BIN)/python -m pytest -q -s -p stress_summary \
-		tests/engine/test_manager_properties.py tests/engine/test_preview.py tests/engine/test_rollback.py tests/model/test_model_fuzz.py tests/e2e/stress_partitions.py \
+		tests/engine/test_manager_properties.py tests/engine/test_preview.py tests/engine/test_rollback.py \
+		tests/engine/test_holds.py tests/model/test_model_fuzz.py tests/e2e/stress_partitions.py \
 		tests/e2e/stress_long_transitions.py tests/ros/test_ros_topics_property.py
 
 # The performance goals (docs/performance.md): a table with each goal, build/bench/results.json

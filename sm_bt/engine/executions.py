@@ -23,6 +23,7 @@ from sm_bt.engine.divergences import Divergences
 from sm_bt.engine.drivers import NodeDriver
 from sm_bt.engine.events import EventKind
 from sm_bt.engine.hierarchy import implied_targets
+from sm_bt.engine.holds import Hold, Holds
 from sm_bt.engine.ledger import Ledger
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.plans import Job, NodeJob, Sequence, Shapes, build_plan
@@ -141,6 +142,8 @@ class Executions:
         self.on_failure = check_policy(on_failure)
         #: Plan shapes, shared with the manager's previews.
         self.shapes = Shapes(self.model)
+        #: The holds in force (:mod:`sm_bt.engine.holds`); the manager makes them.
+        self.holds = Holds(clock)
         self._ledger = ledger
         self._inference = ledger.inference
         self._divergences = divergences
@@ -177,16 +180,22 @@ class Executions:
 
     def start(self, part: str, target: StateMode, description: str, origin: Origin,
               timeout: float | None, transition: Transition | None = None, *, requester: str | None = None,
-              on_failure: str | None = None) -> Request:
+              on_failure: str | None = None, priority: int | None = None) -> Request:
         """Carry out a request for ``target`` of ``part`` (an active mode resolved); the request
         that preempts what it overlaps, or a refused one. ``on_failure``: a user request's failure
-        policy (default: the manager's)."""
+        policy (default: the manager's); ``priority``: its priority against the holds (default:
+        its requester's, :mod:`sm_bt.engine.holds`)."""
         if self._serialiser.closed:  # detached from the backend: nothing it starts could ever end
             return self.refuse(part, description, CLOSED, requester)
         implied = implied_targets(self.model, part, target)
         scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
+        overridden: list[Hold] = []
         if origin is Origin.USER:
             why = "; ".join(filter(None, (self._out_of_reach(n, t) for n, t in implied if n in scope)))
+            if not why and self.holds:
+                level = self.holds.priority_of(requester or Origin.USER.value, priority)
+                why = self.holds.refusal(dict(implied), level)
+                overridden = self.holds.overridden(dict(implied), level)
             if why:  # refused as a whole: nothing is changed
                 return self.refuse(part, description, why, requester)
         request = Request(part, target, description, origin, self._clock.now(), withdraw=self._withdraw,
@@ -194,6 +203,8 @@ class Executions:
         # A rule's or recovery's request follows its own log line: the start is detail then.
         (log.info if origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id, description,
                                                            request.requester)
+        for hold in overridden:  # the last request wins at the same or a higher priority, as ever
+            self.holds.end(hold, f"superseded by request #{request.id} ({description}) of {request.requester}")
         preempted = [e for e in self._executions.values() if e.scope & scope or e.request.part == part]
         for execution in preempted:
             self.finish(execution, False, f"preempted by request #{request.id} ({description})")

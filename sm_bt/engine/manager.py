@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping
 
 from sm_bt.engine.backend import Backend
 from sm_bt.engine.divergences import Divergences
@@ -34,6 +34,7 @@ from sm_bt.engine.drivers import BackendIO, NodeDriver
 from sm_bt.engine.events import Divergence, EventKind, Observer, Subscription
 from sm_bt.engine.executions import CLOSED, Executions
 from sm_bt.engine.hierarchy import Hierarchy, implied_targets
+from sm_bt.engine.holds import Hold, Holds
 from sm_bt.engine.inference import Actual, Inference, NodeObservation
 from sm_bt.engine.ledger import Ledger
 from sm_bt.engine.lifecycle import (
@@ -80,11 +81,14 @@ class ModeManager:
     reactions off. ``on_failure`` is what a request that fails by itself leaves behind, unless it
     says otherwise: ``"stay"`` (the nodes stay where the failure left them), ``"rollback"`` (they
     are put back where they were) or ``"mode:<name>"`` (:mod:`~sm_bt.engine.rollback`).
+    ``priorities`` (requester -> priority) decide between requesters when a part is held
+    (:meth:`hold`, :mod:`~sm_bt.engine.holds`).
     """
 
     def __init__(self, model: Model, backend: Backend, *, request_timeout: float = REQUEST_TIMEOUT,
                  grace_period: float = 2.0, recovery_attempts: int = 3, recovery_window: float = 60.0,
-                 rules: bool = True, recovery: bool = True, on_failure: str = "stay") -> None:
+                 rules: bool = True, recovery: bool = True, on_failure: str = "stay",
+                 priorities: Mapping[str, int] | None = None) -> None:
         self.model = model
         self.backend = backend
         self.clock = backend.clock
@@ -103,6 +107,7 @@ class ModeManager:
         self._executions = Executions(self._ledger, self._divergences, self._reactions, self._drivers, self._serial,
                                       self.clock, request_timeout=request_timeout, renew_budgets=renew,
                                       on_failure=on_failure)
+        self._executions.holds = Holds(self.clock, priorities, locked=self._entered)
         self._reports = NodeReports(self._ledger, self._divergences, self._executions, self._hierarchy,
                                     self._drivers, self._serial, self.clock, renew_budgets=renew)
         self._serial.work = Settling(self._serial, self._divergences, self._responses, self._executions, self.clock)
@@ -240,21 +245,23 @@ class ModeManager:
     # -- commands ---------------------------------------------------------------------------------
 
     def change_mode(self, part: str, mode: str, *, timeout: float | None = None, requester: str = "user",
-                    on_failure: str | None = None) -> Request:
+                    on_failure: str | None = None, priority: int | None = None) -> Request:
         """Ask for ``part`` (system or node) to be active in ``mode`` (``__DEFAULT__`` names its
         default mode). Returns at once. :class:`RequestError` for a part or mode the model does not
         have, or an empty mode name. ``requester`` says who asks, for logs and narratives
         (:attr:`Request.requester`: sm_bt's behaviours say ``"tree"``); ``on_failure``: this
-        request's failure policy (default: the manager's)."""
+        request's failure policy (default: the manager's); ``priority``: against the parts'
+        holds (default: the requester's): a part held at a higher one refuses the request."""
         if not mode:
             raise RequestError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
                                "for the default mode)")
         with self._serial:
             return self._request(part, StateMode(State.ACTIVE, mode), f"change_mode {part} {mode}", timeout,
-                                 requester, on_failure)
+                                 requester, on_failure, priority)
 
     def change_state(self, part: str, transition: Transition | str | int, *,
-                     timeout: float | None = None, requester: str = "user", on_failure: str | None = None) -> Request:
+                     timeout: float | None = None, requester: str = "user", on_failure: str | None = None,
+                     priority: int | None = None) -> Request:
         """Ask for a lifecycle transition of ``part`` (system or node): ``"configure"``,
         ``"activate"``, ``Transition.DEACTIVATE``, ... Returns at once. A settled part must be in
         a state the transition is valid from (as a lifecycle node requires), or already in its
@@ -262,7 +269,7 @@ class ModeManager:
         transition is accepted and its goal state becomes the new target. Activation keeps the
         last mode asked for. :class:`RequestError` for a part the model does not have, or a
         transition that does not exist or cannot be requested; one not valid from where the part
-        is now is a refused request. ``on_failure``: as :meth:`change_mode`'s."""
+        is now is a refused request. ``on_failure``, ``priority``: as :meth:`change_mode`'s."""
         with self._serial:
             self._check_part(part)
             description, target, resolved, refusal = self._state_target(
@@ -270,7 +277,8 @@ class ModeManager:
             if refusal:
                 return self._executions.refuse(part, description, refusal, requester)
             return self._executions.start(part, target, description, Origin.USER, timeout, resolved,
-                                          requester=requester, on_failure=self._policy(part, on_failure))
+                                          requester=requester, on_failure=self._policy(part, on_failure),
+                                          priority=priority)
 
     def preview(self, part: str, mode: str, *, from_: Configuration | None = None) -> Preview:
         """The plan ``change_mode(part, mode)`` would be carried out by now, without doing anything:
@@ -324,7 +332,7 @@ class ModeManager:
         return description, StateMode(goal, mode), resolved, refusal
 
     def change_to(self, part: str, target: StateMode | str, *, timeout: float | None = None,
-                  requester: str = "user", on_failure: str | None = None) -> Request:
+                  requester: str = "user", on_failure: str | None = None, priority: int | None = None) -> Request:
         """Ask for ``part`` to reach ``target`` (``"active.FAST"``, ``"inactive"``, a
         :class:`StateMode`), whatever it is in now: the plan takes every lifecycle step needed.
         Used to put a part back where it was (for instance after holding a mode). Returns at once.
@@ -339,7 +347,34 @@ class ModeManager:
             if wanted.state not in (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE):
                 raise RequestError(f"{description}: {wanted.state.label} is not a state to ask for "
                                    "(unconfigured, inactive or active)")
-            return self._request(part, wanted, description, timeout, requester, on_failure)
+            return self._request(part, wanted, description, timeout, requester, on_failure, priority)
+
+    def hold(self, part: str, mode: str, *, requester: str = "user", priority: int | None = None,
+             lease: float | None = None, timeout: float | None = None) -> Hold:
+        """Keep ``part`` active in ``mode`` for ``requester`` at ``priority`` (default: the
+        requester's) until :meth:`Hold.release`, or until ``lease`` seconds pass without
+        :meth:`Hold.renew`: requests of a lower priority that would change it (or a node below
+        it) are refused, naming the holder. The change itself is :attr:`Hold.request`; when it is
+        refused (by a higher hold, a node out of reach) the hold is not made (``active`` false,
+        ``reason`` says why)."""
+        description = f"hold {part} {mode} [{requester}]"
+        with self._serial:
+            target = self._mode_target(part, StateMode(State.ACTIVE, mode or DEFAULT_MODE), description)
+            request = self._executions.start(part, target, f"change_mode {part} {mode}", Origin.USER, timeout,
+                                             requester=requester, priority=priority)
+            holds = self._executions.holds
+            level = holds.priority_of(requester, priority)
+            if request.refused:
+                return Hold(part, target, requester, level, self.clock.now(), lease, {}, active=False,
+                            reason=request.reason, request=request)
+            made = holds.add(part, target, dict(implied_targets(self.model, part, target)), requester, level, lease)
+            made.request = request
+            return made
+
+    def holds(self) -> list[Hold]:
+        """The holds in force, oldest first."""
+        with self._serial:
+            return list(self._executions.holds)
 
     def subscribe(self, callback: Observer, part: str | Iterable[str] | None = None,
                   kinds: Iterable[EventKind] | None = None) -> Subscription:
@@ -359,18 +394,23 @@ class ModeManager:
             for execution in self._executions.in_progress():
                 self._executions.finish(execution, False, CLOSED)
             self._responses.cancel()
+            self._executions.holds.close()
             self._serial.closed = True
             self.backend.detach()
 
     # -- requests -----------------------------------------------------------------------------------
 
     def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None,
-                 requester: str, on_failure: str | None = None) -> Request:
+                 requester: str, on_failure: str | None = None, priority: int | None = None) -> Request:
         """Start a user request for ``wanted`` (an active mode resolved: ``__DEFAULT__`` is the
         default mode); :class:`RequestError` with the part's real names for one it does not have."""
         wanted = self._mode_target(part, wanted, description)
         return self._executions.start(part, wanted, description, Origin.USER, timeout, requester=requester,
-                                      on_failure=self._policy(part, on_failure))
+                                      on_failure=self._policy(part, on_failure), priority=priority)
+
+    def _entered(self, action: Callable[[], None]) -> None:
+        with self._serial:
+            action()
 
     def _policy(self, part: str, on_failure: str | None) -> str | None:
         """``on_failure`` checked: a policy, and a safe mode the part has (:class:`RequestError`)."""

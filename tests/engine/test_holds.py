@@ -1,0 +1,145 @@
+"""Requesters, priorities and holds (``manager.hold``): a held part refuses lower-priority
+requests with the holder's name, a lease that runs out frees it, the last request still wins at
+the same priority; and the properties over random requesters, priorities, leases and clock steps."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis_profiles import examples
+from model_files import bundled
+from model_generator import GeneratedModel, generated_models
+
+from sm_bt.engine.holds import DEFAULT_PRIORITY, PRIORITIES
+from sm_bt.model.types import Model
+from sm_bt.sim import SimulatedSystem
+
+
+def pilot() -> SimulatedSystem:
+    system = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
+    system.finish(system.manager.change_mode("pilot", "f_normal_mode", requester="tree"))
+    return system
+
+
+def test_a_held_part_refuses_a_lower_priority_request_naming_the_holder() -> None:
+    system = pilot()
+    hold = system.manager.hold("pilot", "f_degraded_mode", requester="rule")
+    system.finish(hold.request)
+    system.run(3.2)
+    refused = system.manager.change_mode("pilot", "f_normal_mode", requester="tree")
+    assert refused.refused
+    assert refused.reason == "pilot is held in active.f_degraded_mode by rule (priority 100) since 3.4 s"
+    below = system.manager.change_mode("amcl", "__DEFAULT__", requester="tree")  # a node the hold needs
+    assert below.reason == ("amcl (a part of pilot) is held in active.DEGRADED by rule (priority 100) since 3.4 s")
+    agrees = system.manager.change_mode("amcl", "DEGRADED", requester="tree")  # what the hold needs anyway
+    assert not agrees.refused
+    assert str(system.manager.actual("pilot")) == "active.f_degraded_mode"
+    assert [str(h) for h in system.manager.holds()] == [
+        f"hold #{hold.id}: pilot in active.f_degraded_mode by rule (priority 100)"]
+
+
+def test_the_same_or_a_higher_priority_wins_as_the_last_request_always_did() -> None:
+    system = pilot()
+    tree_hold = system.manager.hold("pilot", "f_slow_mode", requester="tree")
+    operator = system.finish(system.manager.change_mode("pilot", "f_degraded_mode", requester="operator"))
+    assert operator.succeeded and not tree_hold.active
+    assert tree_hold.reason == f"superseded by request #{operator.id} (change_mode pilot f_degraded_mode) of operator"
+    mine = system.manager.hold("pilot", "f_slow_mode", requester="tree")
+    again = system.manager.change_mode("pilot", "f_normal_mode", requester="tree")  # equal priority
+    assert not again.refused and not mine.active
+
+
+def test_a_lease_that_is_not_renewed_frees_the_part_and_one_renewed_keeps_it() -> None:
+    system = pilot()
+    hold = system.manager.hold("pilot", "f_degraded_mode", requester="metacontroller", lease=2.0)
+    for _ in range(5):  # renewed every second: it lasts
+        system.run(1.0)
+        hold.renew()
+    assert hold.active and system.manager.change_mode("pilot", "f_normal_mode", requester="tree").refused
+    system.run(2.0)  # not renewed: the requester died
+    assert not hold.active and hold.reason == "its lease of 2 s ran out" and system.manager.holds() == []
+    assert system.finish(system.manager.change_mode("pilot", "f_normal_mode", requester="tree")).succeeded
+
+
+def test_a_hold_refused_by_a_higher_one_is_not_made_and_a_release_ends_one() -> None:
+    system = pilot()
+    rule = system.manager.hold("pilot", "f_degraded_mode", requester="rule")
+    tree = system.manager.hold("pilot", "f_slow_mode", requester="tree")
+    assert not tree.active and tree.reason.startswith("pilot is held in active.f_degraded_mode by rule")
+    rule.release()
+    assert not rule.active and rule.reason == "released" and system.manager.holds() == []
+    assert system.manager.hold("pilot", "f_slow_mode", requester="tree", priority=DEFAULT_PRIORITY).active
+    assert PRIORITIES["rule"] > PRIORITIES["operator"] > PRIORITIES["metacontroller"] > PRIORITIES["tree"]
+
+
+# -- properties ------------------------------------------------------------------------------------
+
+REQUESTERS = ("tree", "metacontroller", "operator", "rule")
+
+
+@st.composite
+def held_runs(draw: st.DrawFn) -> tuple[Model, list[tuple[Any, ...]]]:
+    """A generated model and a sequence of holds, requests, releases, renewals and clock steps by
+    several requesters at several priorities."""
+    generated: GeneratedModel = draw(generated_models())
+    model = generated.load()
+    parts = sorted(model.parts)
+    steps: list[tuple[Any, ...]] = []
+    for _ in range(draw(st.integers(1, 12))):
+        kind = draw(st.sampled_from(["hold", "request", "run", "release", "renew"]))
+        if kind in ("hold", "request"):
+            part = draw(st.sampled_from(parts))
+            mode = draw(st.sampled_from(sorted(model.parts[part].modes)))
+            requester = draw(st.sampled_from(REQUESTERS))
+            priority = draw(st.one_of(st.none(), st.sampled_from([10, 50, 90])))
+            lease = draw(st.one_of(st.none(), st.floats(0.5, 5.0))) if kind == "hold" else None
+            steps.append((kind, part, mode, requester, priority, lease))
+        elif kind == "run":
+            steps.append((kind, draw(st.floats(0.05, 3.0))))
+        else:
+            steps.append((kind, draw(st.integers(0, 5))))
+    return model, steps
+
+
+def check_holds(model: Model, steps: list[tuple[Any, ...]]) -> None:
+    system = SimulatedSystem(model, rules=False, recovery=False)
+    manager = system.manager
+    made = []
+    for step in steps:
+        if step[0] in ("hold", "request"):
+            _, part, mode, requester, priority, lease = step
+            before = manager.holds()
+            if step[0] == "hold":
+                hold = manager.hold(part, mode, requester=requester, priority=priority, lease=lease)
+                made.append(hold)
+                request = hold.request
+            else:
+                request = manager.change_mode(part, mode, requester=requester, priority=priority)
+            assert request is not None
+            level = priority if priority is not None else PRIORITIES.get(requester, DEFAULT_PRIORITY)
+            held_higher = [h for h in before if h.priority > level and h.active]
+            if "is held in" in request.reason:
+                assert held_higher, "refused for a hold, but none of a higher priority was there"
+            if not before:
+                assert "is held in" not in request.reason  # one requester: exactly as before
+        elif step[0] == "run":
+            system.run(step[1])
+        elif made:
+            hold = made[step[1] % len(made)]
+            hold.release() if step[0] == "release" else hold.renew()
+        now = manager.clock.now()
+        for hold in manager.holds():
+            # An active hold's part and every part below it keep the targets it holds.
+            for part, target in hold.targets.items():
+                assert manager.target(part) == target, (hold, part, manager.target(part), target)
+            # An expired lease has freed its part by now (its timer runs on the manager's clock).
+            assert hold.expires is None or hold.expires > now - 1e-9, (hold, now)
+
+
+@examples(200, stress=10_000)
+@given(held_runs())
+def test_holds_keep_their_parts_against_lower_priorities_and_leases_free_them(
+        run: tuple[Model, list[tuple[Any, ...]]]) -> None:
+    check_holds(*run)
