@@ -17,7 +17,7 @@ import functools
 from collections import ChainMap
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any
 
 from sm_bt.engine.actual import Actual, NodeObservation, out_of_reach
 from sm_bt.engine.hierarchy import implied_targets
@@ -102,10 +102,11 @@ class Preview:
     rules_stop: tuple[str, ...] = ()
     refused: str = ""
     waits: tuple[str, ...] = ()
-    calls: int = field(init=False)
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "calls", sum(len(step.calls) for step in self.steps))
+    @functools.cached_property
+    def calls(self) -> int:
+        """How many calls the manager would send."""
+        return sum(len(step.calls) for step in self.steps)
 
     @property
     def possible(self) -> bool:
@@ -272,28 +273,42 @@ def preview(model: Model, config: Configuration, part: str, target: StateMode, d
     waits: list[str] = []
     parts, observations, actuals = model.parts, config.observations, config.actuals
     active, primary = State.ACTIVE, PRIMARY_STATES
+    unchanged: list[str] = []
     for name, value, _ in nodes:
-        spec = cast(NodePart, parts[name])
+        spec: NodePart = parts[name]  # type: ignore[assignment]  # a plan's leaves are nodes
         obs = observations[name]
-        reach = ""
-        if obs.gone or not obs.seen or obs.state not in primary:
-            reach = out_of_reach(name, obs, value)
-            if reach:
-                why.append(reach)
-            elif not obs.seen:
-                waits.append(f"{name} to appear")
-            elif obs.state is not State.FINALIZED:
-                waits.append(f"{name} to end its transition ({obs.state.label})")
         state = value.state
         mode = spec.modes[value.mode or spec.default_mode] if state is active else None
+        if obs.seen and not obs.gone and obs.state in primary:  # the usual case, inline
+            calls: tuple[str, ...] = ()
+            observed = None
+            if mode is not None and not mode.matches(obs.parameters):
+                calls, observed = (mode.set_label,), obs.parameters  # replaced, never updated: kept as it is
+            if obs.state is not state:
+                try:
+                    calls += tuple([edge.transition.label for edge in plan(obs.state, state)])
+                except PlanError as error:
+                    why.append(f"{name}: {error}")
+            elif not calls:
+                unchanged.append(name)
+            steps[name] = NodeSteps(name, actuals[name], _LABELS[state] if mode is None else mode.active_label,
+                                    calls, mode, observed)
+            continue
+        reach = out_of_reach(name, obs, value)
+        if reach:
+            why.append(reach)
+        elif not obs.seen:
+            waits.append(f"{name} to appear")
+        elif obs.state is not State.FINALIZED:
+            waits.append(f"{name} to end its transition ({obs.state.label})")
         steps[name], cannot = node_steps(name, obs, state, mode, actuals[name] if obs.seen else "not seen yet")
         if cannot and not reach:
             why.append(cannot)
     targets = _targets(root)
-    unchanged = tuple(name for name, value in targets.items()
-                      if (not steps[name].calls if name in steps else _there(actuals[name], value, model)))
+    unchanged.extend(name for name, value in targets.items()
+                     if name not in steps and _there(actuals[name], value, model))
     start_rules, stop_rules = _rules(model, config, targets)
-    return Preview(part, str(target), description, root, tuple(steps.values()), unchanged,
+    return Preview(part, str(target), description, root, tuple(steps.values()), tuple(unchanged),
                    start_rules, stop_rules, "; ".join(why), tuple(waits))
 
 
