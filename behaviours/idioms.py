@@ -15,6 +15,7 @@ from py_trees.ports import PortInformation, PortsMixin
 from sm_bt.behaviours.change import ChangeMode
 from sm_bt.behaviours.divergence import OnDivergence
 from sm_bt.behaviours.manager_access import REQUESTER, ManagerBehaviour, require_mode_name, seconds
+from sm_bt.engine.holds import Hold
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State, StateMode
@@ -35,16 +36,26 @@ class HoldMode(ManagerBehaviour, register=False):
       asked for another target meanwhile (their request wins, nothing is restored) or it was
       ``finalized`` (not a target to ask for: only a restart leaves it)
 
+    With ``lease`` (seconds) or ``priority`` it holds the part through the manager
+    (:meth:`ModeManager.hold`): requests of a lower priority that would change it are refused,
+    the lease is renewed on every tick, and ``terminate`` releases the hold first (a tree that
+    stops ticking, or dies, frees the part within its lease).
+
     Use it through :func:`hold_mode`, which runs it in a parallel next to the work.
     """
 
     def __init__(self, name: str, part: str, mode: str, timeout: float | None = None, *,
-                 manager: ModeManager | None = None, **kwargs: Any) -> None:
+                 manager: ModeManager | None = None, lease: float | None = None, priority: int | None = None,
+                 **kwargs: Any) -> None:
         super().__init__(name, manager=manager, **kwargs)
         require_mode_name(name, part, mode)
         self.part = part
         self.mode = mode
         self.timeout = seconds(name, timeout)
+        self.lease = seconds(name, lease)
+        self.priority = priority
+        #: The manager's hold, with ``lease`` or ``priority``, while it runs.
+        self.holding: Hold | None = None
         self.request: Request | None = None
         self.restore_request: Request | None = None
         self._held: StateMode | None = None
@@ -66,7 +77,12 @@ class HoldMode(ManagerBehaviour, register=False):
         """Remember the current target and request the mode."""
         self._previous = self.manager.target(self.part)
         self.restore_request = None
-        self.request = self.manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER)
+        if self.lease is not None or self.priority is not None:
+            self.holding = self.manager.hold(self.part, self.mode, requester=REQUESTER, priority=self.priority,
+                                             lease=self.lease, timeout=self.timeout)
+            self.request = self.holding.request
+        else:
+            self.request = self.manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER)
         self.feedback_message = f"requested {self._held}"
 
     def update(self) -> Status:
@@ -74,6 +90,8 @@ class HoldMode(ManagerBehaviour, register=False):
         request = self.request
         if request is None:
             return Status.INVALID
+        if self.holding is not None:
+            self.holding.renew()
         if not request.done:
             self.feedback_message = request.feedback
             return Status.RUNNING
@@ -81,7 +99,9 @@ class HoldMode(ManagerBehaviour, register=False):
             self.feedback_message = request.reason
             return Status.FAILURE
         target = self.manager.target(self.part)
-        if target == self._held:
+        if self.holding is not None and not self.holding.active:
+            self.feedback_message = f"no longer held: {self.holding.reason}"
+        elif target == self._held:
             self.feedback_message = f"holding {self.part} in {self._held}"
         else:
             self.feedback_message = f"{self.part} was re-targeted to {target}: it will not be restored"
@@ -90,6 +110,9 @@ class HoldMode(ManagerBehaviour, register=False):
     def terminate(self, new_status: Status) -> None:
         """Give the part back: withdraw the change if in flight, request the previous target."""
         request, self.request = self.request, None
+        if self.holding is not None:
+            self.holding.release()
+            self.holding = None
         if request is None:
             return
         ours = self.manager.target(self.part) == self._held
@@ -174,15 +197,17 @@ class _Subtree(PortsMixin, register=False):
 
 class HoldModeSubtree(_Subtree, py_trees.composites.Parallel, tag="HoldMode"):
     """What :func:`hold_mode` returns; in XML ``<HoldMode name=".." part=".." mode=".."
-    [timeout=".."]>child</HoldMode>``."""
+    [timeout=".."] [lease=".."] [priority=".."]>child</HoldMode>``."""
 
     def __init__(self, name: str, part: str, mode: str, children: list[py_trees.behaviour.Behaviour] | None = None,
-                 timeout: float | None = None, *, manager: ModeManager | None = None, **kwargs: Any) -> None:
+                 timeout: float | None = None, *, manager: ModeManager | None = None, lease: float | None = None,
+                 priority: int | None = None, **kwargs: Any) -> None:
         work = list(children or [])
         if len(work) != 1:
             raise ValueError(f"{name}: HoldMode holds its mode while exactly one child runs, not {len(work)}")
         # Names lead with the mode (viewers cut long names short) and hold no ':' (dot reads a port).
-        hold = HoldMode(f"Hold {mode}", part, mode, timeout=timeout, manager=manager)
+        hold = HoldMode(f"Hold {mode}", part, mode, timeout=timeout, manager=manager, lease=lease,
+                        priority=None if priority is None else int(priority))
         gated = py_trees.composites.Sequence(f"{mode} work", memory=True, children=[
             HeldModeReady(f"{mode} reached?", hold, manager=manager),
             work[0],
@@ -208,16 +233,18 @@ class SwitchOnDivergenceSubtree(_Subtree, py_trees.composites.Sequence, tag="Swi
 
 
 def hold_mode(name: str, part: str, mode: str, child: py_trees.behaviour.Behaviour,
-              timeout: float | None = None) -> py_trees.behaviour.Behaviour:
+              timeout: float | None = None, *, lease: float | None = None,
+              priority: int | None = None) -> py_trees.behaviour.Behaviour:
     """Run ``child`` with ``part`` held in ``mode``; restore the part's previous target when the
     subtree ends, whether ``child`` succeeded, failed or was interrupted.
 
     Returns ``Parallel(SuccessOnOne)`` of a :class:`HoldMode` and ``Sequence(memory=True)`` of
     :class:`HeldModeReady` then ``child``: the child starts once the hold's change is confirmed,
     the subtree has the child's result, and it fails if the mode cannot be reached (within
-    ``timeout``, or the manager's ``request_timeout``) or is lost before the child starts.
+    ``timeout``, or the manager's ``request_timeout``) or is lost before the child starts. With
+    ``lease`` or ``priority`` the part is held through the manager (:class:`HoldMode`).
     """
-    return HoldModeSubtree(name, part, mode, [child], timeout=timeout)
+    return HoldModeSubtree(name, part, mode, [child], timeout=timeout, lease=lease, priority=priority)
 
 
 def switch_on_divergence(name: str, part: str | None, system: str, mode: str,

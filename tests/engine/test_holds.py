@@ -143,3 +143,36 @@ def check_holds(model: Model, steps: list[tuple[Any, ...]]) -> None:
 def test_holds_keep_their_parts_against_lower_priorities_and_leases_free_them(
         run: tuple[Model, list[tuple[Any, ...]]]) -> None:
     check_holds(*run)
+
+
+def test_hold_mode_in_a_tree_renews_its_lease_every_tick_and_a_dead_tree_lets_go() -> None:
+    import py_trees
+
+    from sm_bt.behaviours import hold_mode
+
+    system = pilot()
+    work = py_trees.behaviours.Running("Pass the door")
+    tree = system.tree(hold_mode("Careful", "pilot", "f_slow_mode", work, lease=1.0))
+    for _ in range(20):  # 2 s of ticks: the lease of 1 s is renewed on each
+        tree.tick()
+        system.run(0.1)
+    (held,) = system.manager.holds()
+    assert held.requester == "tree" and str(held.target) == "active.f_slow_mode"
+    low = system.manager.change_mode("pilot", "f_normal_mode", requester="script", priority=10)
+    assert low.refused and "by tree (priority 40)" in low.reason
+    system.run(1.5)  # the tree stopped ticking (its process died): the lease runs out
+    assert system.manager.holds() == [] and held.reason == "its lease of 1 s ran out"
+    assert system.finish(system.manager.change_mode("pilot", "f_normal_mode", requester="script",
+                                                    priority=10)).succeeded
+
+
+def test_hold_mode_releases_its_hold_when_the_work_ends() -> None:
+    import py_trees
+
+    from sm_bt.behaviours import hold_mode
+
+    system = pilot()
+    root = hold_mode("Careful", "pilot", "f_slow_mode", py_trees.behaviours.Success("Passed"), priority=70)
+    trace = system.tick_until_done(system.tree(root), timeout=10.0)
+    assert trace[-1].status.value == "SUCCESS"
+    assert system.manager.holds() == []  # released, and the previous mode asked back
