@@ -49,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="what a request that fails leaves behind: stay (the nodes where the failure left them; "
                              "the default), rollback (every node it moved put back where it was) or mode:NAME (that "
                              "mode of the request's part asked for)")
+    parser.add_argument("--requester", default="operator", metavar="NAME",
+                        help="who the requests through the system_modes interface come from: their priority "
+                             "against the parts' holds (default operator, priority 80)")
     parser.add_argument("--no-rules", action="store_true", help="do not apply the model's rules")
     parser.add_argument("--no-recovery", action="store_true", help="do not restore nodes that left their target")
     parser.add_argument("--lenient", action="store_true",
@@ -86,7 +89,7 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
     try:
         from sm_bt.ros.runtime import RosRuntime
 
-        runtime = RosRuntime(model, node_name=args.node_name, manager_options={
+        runtime = RosRuntime(model, node_name=args.node_name, requester=args.requester, manager_options={
             "grace_period": args.grace_period, "request_timeout": args.request_timeout,
             "recovery_attempts": args.recovery_attempts, "rules": not args.no_rules,
             "recovery": not args.no_recovery, "on_failure": args.on_failure})

@@ -87,12 +87,15 @@ def _mode_label(actual: Actual) -> str:
 
 
 class ModeManagerServer:
-    """Serve ``manager``'s parts on ``node``; ``close()`` removes the services and topics."""
+    """Serve ``manager``'s parts on ``node``; ``close()`` removes the services and topics. The
+    requests made through the interface come from ``requester`` (its priority decides against the
+    parts' holds, :mod:`sm_bt.engine.holds`)."""
 
     def __init__(self, node: Node, manager: ModeManager,
-                 on_request: Callable[[str, Request], None] | None = None) -> None:
+                 on_request: Callable[[str, Request], None] | None = None, requester: str = "operator") -> None:
         self._node = node
         self._manager = manager
+        self.requester = requester
         self._on_request = on_request  # told of every request made through the interface
         self._services: list[Any] = []
         self._publishers: list[Any] = []
@@ -163,7 +166,7 @@ class ModeManagerServer:
             response.success = False
             return response
         try:
-            handle = self._manager.change_mode(part, mode)
+            handle = self._manager.change_mode(part, mode, requester=self.requester)
         except RequestError as error:  # a name the model does not have: nothing is touched
             log.warning("change_mode of %s to %r refused: %s", part, mode, error)
             response.success = False
@@ -180,7 +183,7 @@ class ModeManagerServer:
         transition: str | int = request.transition.label or int(request.transition.id)
         log.debug("-> callback change_state of %s: %s", part, transition)
         try:
-            handle = self._manager.change_state(part, transition)
+            handle = self._manager.change_state(part, transition, requester=self.requester)
         except RequestError as error:
             log.warning("change_state of %s (%s) refused: %s", part, transition, error)
             response.success = False

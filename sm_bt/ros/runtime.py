@@ -88,7 +88,8 @@ class RosRuntime:
     def __init__(self, model: Model, *, node_name: str = MANAGER_NODE_NAME, serve: bool = True,
                  own_domain: bool = False, manager_options: Mapping[str, Any] | None = None,
                  backend_options: Mapping[str, Any] | None = None, node: Any = None,
-                 switch_interval: float | None = None, events_executor: bool = True) -> None:
+                 switch_interval: float | None = None, events_executor: bool = True,
+                 requester: str = "operator") -> None:
         self._switch_interval: tuple[float, float] | None = None
         if node is None:
             prepare(own_domain=own_domain, local_only=own_domain)
@@ -145,8 +146,11 @@ class RosRuntime:
         # The manager's view for operators and aggregators, with the interface it serves.
         self.diagnostics = DiagnosticsPublisher(self.node, self.manager, self.clock,
                                                 link=self.backend.link) if serve else None
+        # Requests through the system_modes interface come from ``requester`` (its priority
+        # decides against the holds of the manager's own users, a tree in this process).
         self.server = ModeManagerServer(self.node, self.manager,
-                                        self.diagnostics.requested if self.diagnostics else None) if serve else None
+                                        self.diagnostics.requested if self.diagnostics else None,
+                                        requester=requester) if serve else None
         if switch_interval is not None:
             self._switch_interval = (sys.getswitchinterval(), switch_interval)
             sys.setswitchinterval(switch_interval)
