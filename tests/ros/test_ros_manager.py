@@ -330,3 +330,21 @@ def test_the_runtime_reports_a_node_appearing_late(node_processes: Starter) -> N
         assert runtime.manager.observation("drive_base").parameters == {"max_speed": 0.1, "controller": "PID"}
     finally:
         runtime.close()
+
+
+def test_requests_through_the_interface_come_from_the_operator_and_respect_holds(
+        pilot: RosHarness, ros_context: RosContext) -> None:
+    """A rule's hold (priority 100) refuses an operator's change_mode (80) over ROS; a tree's
+    hold (40) gives way to it, as the last request always did."""
+    manager = pilot.manager
+    settle(pilot, manager.change_mode("pilot", "f_normal_mode", requester="tree"))
+    rule = manager.hold("pilot", "f_degraded_mode", requester="rule")
+    settle(pilot, rule.request)
+    refused = ros_context.call(ChangeMode, "/pilot/change_mode", ChangeMode.Request(mode_name="f_normal_mode"))
+    assert not refused.success and str(manager.actual("pilot")) == "active.f_degraded_mode"
+    rule.release()
+    tree = manager.hold("pilot", "f_slow_mode", requester="tree")
+    settle(pilot, tree.request)
+    accepted = ros_context.call(ChangeMode, "/pilot/change_mode", ChangeMode.Request(mode_name="f_normal_mode"))
+    assert accepted.success and not tree.active
+    assert tree.reason.startswith("superseded by request #") and tree.reason.endswith("of operator")
