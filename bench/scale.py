@@ -26,10 +26,12 @@ from typing import Any
 from bench.figures import Figure
 from bench.generated import ROOT, model_text, shape
 from sm_bt.engine.backend import BackendListener, NodeReport
+from sm_bt.engine.hierarchy import implied_targets
+from sm_bt.engine.holds import DEFAULT_PRIORITY
 from sm_bt.engine.inference import infer_all
 from sm_bt.engine.requests import Request
 from sm_bt.model.loader import load_model_text
-from sm_bt.model.states import State
+from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.sim import SimBackend, SimulatedSystem
 
@@ -37,6 +39,8 @@ SIZES = (100, 250, 500, 1000, 2500, 5000, 10_000)
 QUICK_SIZES = (100, 250)
 #: Goals of the issue, by figure and N.
 REQUEST_GOALS = {1000: 0.5, 10_000: 5.0}
+#: A request's admission check with 100 holds at 10,000 nodes (issue 33), microseconds.
+ADMISSION_GOAL_US = 10.0
 #: Previewing a whole-system change (issue 32), CPU milliseconds.
 PREVIEW_GOAL_MS = {1000: 5.0, 10_000: 50.0}
 CONSTRUCTION_GOAL = {10_000: 2.0}
@@ -175,6 +179,26 @@ def _from_active(loaded: Model, fault_events: int) -> dict[str, Any]:
     return out
 
 
+def _admission(loaded: Model, holds: int = 100, samples: int = 2000) -> float:
+    """The median time of a request's admission check against ``holds`` holds (one node each,
+    held by a metacontroller): a tree's request for one of those nodes, refused (issue 33)."""
+    rig = _Rig(loaded, State.ACTIVE)
+    nodes = [node.name for node in loaded.nodes][:holds]
+    for node in nodes:
+        rig.drive(rig.manager.hold(node, "FAST", requester="metacontroller").request)  # type: ignore[arg-type]
+    executions = rig.manager._executions  # the check itself: what each user request pays
+    wanted = [dict(implied_targets(loaded, node, StateMode(State.ACTIVE, "__DEFAULT__"))) for node in nodes]
+    times = []
+    with _frozen():
+        for index in range(samples):
+            targets = wanted[index % len(wanted)]
+            start = time.perf_counter()
+            refused = executions.holds.refusal(targets, DEFAULT_PRIORITY)
+            times.append(time.perf_counter() - start)
+            assert refused, "a held node's change is refused"
+    return statistics.median(times)
+
+
 def _bring_up(loaded: Model, *, one_request: bool) -> float:
     rig = _Rig(loaded, State.UNCONFIGURED)
 
@@ -249,6 +273,10 @@ def run(quick: bool) -> list[Figure]:
                 figures.append(Figure("P3", f"full re-inference / {label}, N={nodes}", full / value, "x",
                                       FULL_OVER_EVENT_GOAL if nodes == 10_000 else None, op=">=",
                                       details={"full_us": round(full, 1)}))
+    if not quick:
+        admission = _admission(model(sizes[-1]))
+        figures.append(Figure("holds", f"admission check of a request, 100 holds, N={sizes[-1]}", admission * 1e6,
+                              "µs", ADMISSION_GOAL_US, details={"holds": 100, "samples": 2000}))
     if 1000 in medians and 10_000 in medians:
         small, large = _paired_event_medians(1000, 10_000, GROWTH_ROUNDS)
         figures.append(Figure("P3", "node event growth, N=10000 / N=1000", large / small, "x", GROWTH_GOAL,

@@ -96,6 +96,10 @@ class Holds:
         self.locked = locked or (lambda action: action())
         self._holds: dict[int, Hold] = {}
         self._timers: dict[int, TimerHandle] = {}
+        # Each held part's holds, and how many parts are held in all: admission looks a request's
+        # targets up here, or goes through the holds, whichever is fewer.
+        self._by_part: dict[str, list[Hold]] = {}
+        self._held_parts = 0
 
     def priority_of(self, requester: str, priority: int | None = None) -> int:
         return priority if priority is not None else self.priorities.get(requester, DEFAULT_PRIORITY)
@@ -108,22 +112,31 @@ class Holds:
 
     # -- admission --------------------------------------------------------------------------------
 
+    def breaking(self, targets: Mapping[str, StateMode]) -> list[tuple[Hold, str]]:
+        """The holds that ``targets`` would break, each with the first part it would change."""
+        found: dict[int, tuple[Hold, str]] = {}
+        if len(targets) <= self._held_parts:
+            by_part = self._by_part
+            for part, value in targets.items():
+                for hold in by_part.get(part, ()):
+                    if hold.id not in found and hold.targets[part] != value:
+                        found[hold.id] = (hold, part)
+        else:
+            for hold in self._holds.values():
+                changed = _conflict(hold.targets, targets)
+                if changed is not None:
+                    found[hold.id] = (hold, changed)
+        return list(found.values())
+
     def overridden(self, targets: Mapping[str, StateMode], priority: int) -> list[Hold]:
         """The holds of the same or a lower priority that ``targets`` would break."""
-        return [hold for hold in self._holds.values()
-                if hold.priority <= priority and _conflict(hold.targets, targets) is not None]
+        return [hold for hold, _ in self.breaking(targets) if hold.priority <= priority]
 
     def refusal(self, targets: Mapping[str, StateMode], priority: int) -> str:
         """Why a request for ``targets`` at ``priority`` is refused: the holds of a higher
         priority it would break ("" when none)."""
         now = self._clock.now()
-        found = []
-        for hold in self._holds.values():
-            if hold.priority > priority:
-                part = _conflict(hold.targets, targets)
-                if part is not None:
-                    found.append(hold.describe(now, part))
-        return "; ".join(found)
+        return "; ".join(hold.describe(now, part) for hold, part in self.breaking(targets) if hold.priority > priority)
 
     # -- life of a hold ---------------------------------------------------------------------------
 
@@ -132,6 +145,9 @@ class Holds:
         now = self._clock.now()
         hold = Hold(part, target, requester, priority, now, lease, dict(targets), _holds=self)
         self._holds[hold.id] = hold
+        for name in hold.targets:
+            self._by_part.setdefault(name, []).append(hold)
+        self._held_parts += len(hold.targets)
         if lease is not None:
             hold.expires = now + lease
             self._arm(hold)
@@ -147,6 +163,12 @@ class Holds:
             return
         hold.active, hold.reason = False, reason
         self._holds.pop(hold.id, None)
+        for name in hold.targets:
+            holders = self._by_part[name]
+            holders.remove(hold)
+            if not holders:
+                del self._by_part[name]
+        self._held_parts -= len(hold.targets)
         timer = self._timers.pop(hold.id, None)
         if timer is not None:
             timer.cancel()
