@@ -4,6 +4,7 @@ the same priority; and the properties over random requesters, priorities, leases
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 from hypothesis import given
@@ -176,3 +177,41 @@ def test_hold_mode_releases_its_hold_when_the_work_ends() -> None:
     trace = system.tick_until_done(system.tree(root), timeout=10.0)
     assert trace[-1].status.value == "SUCCESS"
     assert system.manager.holds() == []  # released, and the previous mode asked back
+
+
+def test_a_metacontroller_and_a_tree_sharing_pilot_do_not_ping_pong_once_it_holds() -> None:
+    """The tree asks for normal mode again and again; the metacontroller wants degraded mode.
+    Asking as everyone always did, they switch the pilot back and forth; holding, it switches once."""
+    import py_trees
+
+    from sm_bt.behaviours import ChangeMode
+    from sm_bt.engine.events import EventKind
+    from sm_bt.trees.bt_cpp_nodes import Delay
+
+    def switches(hold: bool) -> int:
+        system = pilot()
+        modes = [str(system.manager.actual("pilot"))]  # active.f_normal_mode, then every change
+        system.manager.subscribe(lambda event: modes.append(str(event.actual)), part="pilot",
+                                 kinds=[EventKind.ACTUAL])
+        # Every half second, the tree's routine asks for normal mode.
+        routine = py_trees.composites.Sequence("Routine", memory=True, children=[
+            Delay("Pause", py_trees.behaviours.Success("Wait"), delay_msec=500),
+            ChangeMode("Normal", "pilot", "f_normal_mode")])
+        asks = py_trees.decorators.Repeat("Again", routine, num_success=-1)
+        tree = system.tree(py_trees.decorators.FailureIsRunning("Keep asking", asks))
+        held = None
+        for _ in range(20):  # seconds
+            if hold:
+                if held is None:
+                    held = system.manager.hold("pilot", "f_degraded_mode", requester="metacontroller", lease=2.0)
+                held.renew()
+            else:
+                system.manager.change_mode("pilot", "f_degraded_mode", requester="metacontroller")
+            for _ in range(10):
+                tree.tick()
+                system.run(0.1)
+        shown = [mode for mode in modes if mode.startswith("active.f_")]
+        return sum(1 for before, after in itertools.pairwise(shown) if before != after)
+
+    assert switches(hold=False) >= 10  # ping-pong
+    assert switches(hold=True) == 1  # normal -> degraded, and it stays
