@@ -73,6 +73,11 @@ class Hold:
         if holds is not None:
             holds.locked(lambda: holds.end(self, "released"))
 
+    def holder(self) -> str:
+        """Who holds it, at which priority, until when: ``metacontroller (priority 60, until 12.3 s)``."""
+        until = f", until {self.expires:.1f} s" if self.expires is not None else ""
+        return f"{self.requester} (priority {self.priority}{until})"
+
     def describe(self, now: float, part: str | None = None) -> str:
         """Why a request for ``part`` (default: the held part) is refused."""
         held = self.part if part is None or part == self.part else f"{part} (a part of {self.part})"
@@ -109,6 +114,10 @@ class Holds:
 
     def __bool__(self) -> bool:
         return bool(self._holds)
+
+    def on(self, part: str) -> list[Hold]:
+        """The holds that hold ``part`` (its own, and those of the systems above it)."""
+        return list(self._by_part.get(part, ()))
 
     # -- admission --------------------------------------------------------------------------------
 

@@ -234,7 +234,8 @@ class ModeManager:
                             self._divergences.records.get(part), part in self._reactions.gave_up,
                             observation.reachable if observation is not None else None,
                             observation.gone if observation is not None else "",
-                            self._reports.returns.get(part) if node else None)
+                            self._reports.returns.get(part) if node else None,
+                            "; ".join(hold.holder() for hold in self._executions.holds.on(part)))
 
     def last_return(self, node: str) -> NodeReturn | None:
         """How ``node`` came back the last time it had vanished (``None``: it never did)."""

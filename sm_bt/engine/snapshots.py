@@ -21,8 +21,9 @@ from sm_bt.model.types import PartKind
 class PartSnapshot:
     """``part`` at one moment: its inferred ``actual``, its ``target`` (None before anything was
     asked of it), its ``divergence`` (None on target), and whether rules and recovery gave up on
-    it. For a node also: whether the backend reaches it (``reachable``; ``gone`` says why not) and
-    how it came back the last time it had vanished."""
+    it; ``held_by``: who holds it, and until when (:mod:`~sm_bt.engine.holds`; "" when nobody).
+    For a node also: whether the backend reaches it (``reachable``; ``gone`` says why not) and how
+    it came back the last time it had vanished."""
 
     part: str
     kind: PartKind
@@ -33,6 +34,7 @@ class PartSnapshot:
     reachable: bool | None = None  # None for a system
     gone: str = ""
     last_return: NodeReturn | None = None
+    held_by: str = ""
 
     @property
     def is_node(self) -> bool:

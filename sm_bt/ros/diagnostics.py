@@ -13,7 +13,8 @@ One ``DiagnosticStatus`` per part of the model, named ``"{manager node}: {part}"
 
 ``values`` carry ``target``, ``actual``, ``divergence``, the last request (``last_request``,
 ``last_request_outcome``: running/succeeded/failed/refused, ``last_request_reason``,
-``last_request_by``) and for nodes ``reachable``, ``last_return`` (how it came back the last time
+``last_request_by``), who holds it (``held_by``: ``metacontroller (priority 60, until 12.3 s)``,
+empty when nobody) and for nodes ``reachable``, ``last_return`` (how it came back the last time
 it was out of reach: ``unconfigured (back after 4.2 s; was active.f_normal)``), ``round_trip_ms`` and
 ``liveness_window_s``.
 
@@ -88,6 +89,7 @@ def part_diagnostic(manager: ModeManager, part: str, last: Request | None, link:
         ("last_request_outcome", outcome),
         ("last_request_reason", last.reason if last is not None else ""),
         ("last_request_by", last.requester if last is not None else ""),
+        ("held_by", status.held_by),
     ]
     if status.reachable is not None:
         values.append(("reachable", "true" if status.reachable else "false"))

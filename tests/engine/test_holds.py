@@ -215,3 +215,19 @@ def test_a_metacontroller_and_a_tree_sharing_pilot_do_not_ping_pong_once_it_hold
 
     assert switches(hold=False) >= 10  # ping-pong
     assert switches(hold=True) == 1  # normal -> degraded, and it stays
+
+
+def test_who_holds_a_part_is_in_its_status_and_its_diagnostic() -> None:
+    from sm_bt.ros.diagnostics import part_diagnostic
+
+    system = pilot()
+    hold = system.manager.hold("pilot", "f_degraded_mode", requester="metacontroller", lease=2.0)
+    system.finish(hold.request)
+    expires = f"{hold.expires:.1f}"
+    assert system.manager.status("pilot").held_by == f"metacontroller (priority 60, until {expires} s)"
+    assert system.manager.status("amcl").held_by == f"metacontroller (priority 60, until {expires} s)"  # below it
+    with system.manager.lock:
+        values = dict(part_diagnostic(system.manager, "amcl", None).values)
+    assert values["held_by"] == f"metacontroller (priority 60, until {expires} s)"
+    hold.release()
+    assert system.manager.status("pilot").held_by == ""
