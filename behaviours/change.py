@@ -84,7 +84,7 @@ class ChangeMode(_RequestBehaviour):
     """Put ``part`` (a system or a node) in ``mode``, active.
 
     * ``initialise``: request the change (``ModeManager.change_mode``); ``plan``: its preview,
-      from where the parts were (:meth:`Request.preview`)
+      from where the parts were (:meth:`ModeManager.plan_of`)
     * ``update``: RUNNING while in progress (feedback: the step in progress, and the plan's
       calls), SUCCESS when the manager confirms the part's inferred actual state is
       ``active.<mode>``, FAILURE with the manager's reason otherwise
@@ -113,7 +113,7 @@ class ChangeMode(_RequestBehaviour):
     def _make_request(self, manager: ModeManager) -> Request:
         request = manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER,
                                       on_failure=self.on_failure)
-        self.plan = request.preview()
+        self.plan = manager.plan_of(request)
         return request
 
 

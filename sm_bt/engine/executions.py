@@ -14,6 +14,7 @@ failed, withdrawn, timed out).
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable, Iterable, Mapping
 
@@ -210,9 +211,10 @@ class Executions:
             self.finish(execution, False, f"preempted by request #{request.id} ({description})")
         if origin is Origin.USER:
             request.on_failure = check_policy(on_failure or self.on_failure)
-        # Where the parts are now, kept for the request's preview (made only if asked for).
+        # Where the parts are now, kept for the request's preview (made only if asked for, once).
         kept = Configuration(self._inference).kept(name for name, _ in implied)
-        request._preview = lambda: preview(self.model, kept, part, target, description, shapes=self.shapes)
+        request._plan = functools.cache(lambda: preview(self.model, kept, part, target, description,
+                                                        shapes=self.shapes))
         before = snapshot(self.model, scope, self._inference.observations) if request.on_failure == "rollback" else {}
         previous = self._assign_targets(implied, origin, transition)
         if origin is Origin.USER:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable, Iterable, Mapping
+from typing import cast
 
 from sm_bt.engine.backend import Backend
 from sm_bt.engine.divergences import Divergences
@@ -303,6 +304,13 @@ class ModeManager:
             if target.state is State.ACTIVE and from_ is not None:
                 target = StateMode(State.ACTIVE, self.model.parts[part].default_mode)
             return self._preview(part, target, description, refusal, from_)
+
+    def plan_of(self, request: Request) -> Preview | None:
+        """The plan ``request`` is carried out by, previewed from where the parts were when it
+        started (made when first asked for: a view shows it next to the request); ``None`` for a
+        refused request or a rollback."""
+        make = request._plan
+        return cast(Preview, make()) if make is not None else None
 
     def _preview(self, part: str, target: StateMode, description: str, refusal: str,
                  from_: Configuration | None) -> Preview:

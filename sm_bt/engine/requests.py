@@ -10,12 +10,8 @@ from __future__ import annotations
 import enum
 import itertools
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from sm_bt.model.states import StateMode
-
-if TYPE_CHECKING:
-    from sm_bt.engine.preview import Preview
 
 
 class Origin(str, enum.Enum):
@@ -58,7 +54,8 @@ class Request:
         #: What happens when it fails by itself: "stay", "rollback" or "mode:<name>"
         #: (:mod:`sm_bt.engine.rollback`; a user request's, the manager's default unless given).
         self.on_failure = "stay"
-        self._preview: Callable[[], Preview] | None = None  # set when it starts: see preview()
+        #: Makes its plan's preview once asked for (set when it starts: ModeManager.plan_of).
+        self._plan: Callable[[], object] | None = None
         self._withdraw = withdraw
         self._progress: Callable[[], str] | None = None  # the step in progress, while running
         self._callbacks: list[Callable[[Request], None]] = []
@@ -75,16 +72,6 @@ class Request:
             callback(self)
         else:
             self._callbacks.append(callback)
-
-    def preview(self) -> Preview | None:
-        """The plan this request was carried out by, as previewed from where the parts were when
-        it started (made when first asked for: a view shows it next to the request); ``None`` for
-        a refused request or a rollback."""
-        if self._preview is None:
-            return None
-        made = self._preview()
-        self._preview = lambda: made
-        return made
 
     @property
     def feedback(self) -> str:

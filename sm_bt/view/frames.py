@@ -12,7 +12,7 @@ A frame is a plain dict (JSON-ready), format 2::
      "events": [{"time", "kind", "part", "text", ...}, ...]}  # the manager's events since the frame before, if any
 
 A request's events also carry ``request`` (its number), ``done`` and ``ok`` (the timeline draws
-its band); its start, ``plan``: the lines of its preview (:meth:`Request.preview`, shown with its
+its band); its start, ``plan``: the lines of its preview (:meth:`ModeManager.plan_of`, shown with its
 band and in the list). Parts' actual and target changes are not events here: the ``modes`` table says them.
 :mod:`sm_bt.view.recording` writes frames to a file, reads them back (format 1, a whole tree in
 every frame, too) and folds a delta into the key frame before it.
@@ -126,7 +126,7 @@ class FrameMaker:
             entry.update(request=request.id, done=request.done, ok=request.succeeded if request.done else None)
             if not request.done:
                 entry["text"] += f" [{request.requester}]"  # who asked: tree, user, rule, recovery
-                plan = request.preview()
+                plan = self._manager.plan_of(request)
                 if plan is not None and plan.possible:  # shown with the request's band
                     lines = plan.lines()
                     entry["plan"] = lines[:PLAN_LINES] + ([f"… {len(lines) - PLAN_LINES} more lines"]
