@@ -12,10 +12,12 @@ says which engine it was found on:
 from __future__ import annotations
 
 from scenario import (
+    Cancel,
     ChangeMode,
     ChangeState,
     ChangeTo,
     Crash,
+    FailNext,
     HangNext,
     ManagerOptions,
     RejectParameters,
@@ -799,4 +801,71 @@ def test_a_final_request_made_before_the_news_of_a_restart_may_fail_naming_the_n
         tree=((TreeItem(kind="wait_for_mode", part="navigation", arg="f_normal_mode", timeout=0.5),),),
         final=ChangeMode(part="navigation", mode="f_energy_saving_mode"),
         final_delay=0.01,
+    ))
+
+
+# -- found by make stress on 2026-11-27 (c083f7f), also at 0687ff3 ---------------------------------------
+
+GENERATED_ONE_NODE = """\
+s0:
+  ros__parameters:
+    type: system
+    parts:
+      n0
+    modes:
+      __DEFAULT__:
+        n0: inactive
+      S1:
+        n0: active.__DEFAULT__
+      S2:
+        n0: unconfigured
+      S3:
+        n0: active.M1
+    rules:
+      r0:
+        if_target: active.__DEFAULT__
+        if_part: [n0, inactive]
+        new_target: active.S3
+
+n0:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          p0: 15
+      M1:
+        ros__parameters:
+          p0: 72
+"""
+
+
+def test_two_restarts_at_one_instant_renew_the_budget_twice() -> None:
+    """A node restarted twice at the same instant appears twice; each new process makes its
+    recovery budget whole (docs/manager.md, "Giving up"), so recovery restores it once after each.
+    The invariant I6 renewed the budget once per restarted node, not once per restart, and flagged
+    the second restore."""
+    check(Scenario(
+        model="generated",
+        model_text=GENERATED_ONE_NODE,
+        manager=ManagerOptions(grace_period=0.0, request_timeout=9.0, recovery_attempts=1, recovery_window=10.0,
+                               rules=False, recovery=True),
+        sim=SimOptions(transition_delay=0.05, error_delay=0.0, parameter_delay=0.05, vanish_after=1.0,
+                       late=(("n0", 8.6),), report_delay=0.03),
+        steps=(
+            Scheduled(0.0, ChangeState(part="ghost", transition="configure")),
+            Scheduled(0.0, FailNext(node="n0", transition="cleanup", outcome="failure", on_error="failure")),
+            Scheduled(1.87, ChangeTo(part="s0", target="active.TYPO")),
+            Scheduled(11.87, ChangeMode(part="s0", mode="__DEFAULT__")),
+            Scheduled(13.38, HangNext(node="n0", transition="cleanup")),
+            Scheduled(16.28, ChangeTo(part="ghost", target="active.TYPO")),
+            Scheduled(16.28, Restart(node="n0", state="active")),
+            Scheduled(16.28, HangNext(node="n0", transition="deactivate")),
+            Scheduled(16.28, Restart(node="n0", state="active")),
+            Scheduled(18.88, Cancel(request=5)),
+            Scheduled(18.88, Trigger(node="n0", choice=0, outcome="success", on_error="success")),
+            Scheduled(18.905, ChangeTo(part="s0", target="finalized")),
+        ),
+        final=ChangeMode(part="s0", mode="__DEFAULT__"),
+        final_delay=0.1,
     ))

@@ -450,7 +450,9 @@ class _Runner:
         self.set_by: dict[str, Origin] = {}  # who made the last request for each part (I8)
         self.targets: dict[str, StateMode | None] = {name: None for name in self.model.parts}
         self.tree: _Tree | None = None
-        self.renewing: set[str] = set()  # restarted nodes whose budget renews when they appear (I6)
+        # Restarts whose new process the manager has not heard of yet, by node: each appearance renews
+        # the node's budget (I6), so two restarts at one instant renew it twice.
+        self.renewing: dict[str, int] = {}
         _watch_appearances(self.backend, self._appeared)
         self.system = SimulatedSystem(self.model, backend=self.backend, record=False,
                                       request_timeout=options.request_timeout, grace_period=options.grace_period,
@@ -535,14 +537,18 @@ class _Runner:
         """Restart ``node``; with ``renew``, its budget is whole again when the manager hears of the
         new process (its appearance report, maybe ``report_delay`` later)."""
         if renew:
-            self.renewing.add(node)
+            self.renewing[node] = self.renewing.get(node, 0) + 1
         self.backend.restart(node, state)
 
     def _appeared(self, node: str) -> None:
         """The manager is about to hear that ``node`` appeared: a restarted one's budget is whole
         again from this instant, before the manager can react (it may restore from the report)."""
-        if node in self.renewing:
-            self.renewing.discard(node)
+        pending = self.renewing.get(node, 0)
+        if pending:
+            if pending == 1:
+                del self.renewing[node]
+            else:
+                self.renewing[node] = pending - 1
             self.budgets[node].count = 0
 
     def _violate(self, kind: type[InvariantViolation], message: str) -> None:
