@@ -11,7 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis_profiles import examples
 from model_files import bundled
-from model_generator import GeneratedModel, generated_models
+from model_generator import GeneratedModel, generated_models, node_starts
 
 from sm_bt.engine.preview import NodeSteps, Preview, SystemSteps, configuration, nodes_of
 from sm_bt.model.errors import RequestError
@@ -115,17 +115,12 @@ def previewed_changes(draw: st.DrawFn) -> tuple[Model, dict[str, Any], str, str,
     "state", mode or transition)."""
     generated: GeneratedModel = draw(generated_models())
     model = generated.load()
-    states: dict[str, Any] = {}
-    parameters: dict[str, Any] = {}
-    for node in model.nodes:
-        assert isinstance(node, NodePart)
-        states[node.name] = draw(st.sampled_from([State.UNCONFIGURED, State.INACTIVE, State.ACTIVE]))
-        parameters[node.name] = node.modes[draw(st.sampled_from(sorted(node.modes)))].values()
+    start = draw(node_starts(model))
     part = draw(st.sampled_from(sorted(model.parts)))
     if draw(st.booleans()):
-        return model, {"initial_state": states, "initial_parameters": parameters}, part, "mode", \
+        return model, start, part, "mode", \
             draw(st.sampled_from(sorted(model.parts[part].modes)))
-    return model, {"initial_state": states, "initial_parameters": parameters}, part, "state", \
+    return model, start, part, "state", \
         draw(st.sampled_from(REQUESTABLE))
 
 

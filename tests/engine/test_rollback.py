@@ -12,13 +12,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis_profiles import examples
 from model_files import bundled
-from model_generator import GeneratedModel, generated_models
+from model_generator import GeneratedModel, flat_system_text, generated_models, node_starts
 
 from sm_bt.engine.lifecycle import Outcome, Transition
 from sm_bt.model.errors import RequestError
 from sm_bt.model.loader import load_model_text
 from sm_bt.model.states import State
-from sm_bt.model.types import Model, NodePart
+from sm_bt.model.types import Model
 from sm_bt.sim import SimulatedSystem
 
 
@@ -28,34 +28,7 @@ def nodes_as_they_are(system: SimulatedSystem) -> dict[str, tuple[State, dict[st
 
 
 def twenty_nodes() -> Model:
-    names = [f"n{i:02d}" for i in range(20)]
-    parts = "\n".join(f"      {name}" for name in names)
-    fast = "\n".join(f"        {name}: active.FAST" for name in names)
-    slow = "\n".join(f"        {name}: inactive" for name in names)
-    nodes = "\n".join(f"""{name}:
-  ros__parameters:
-    type: node
-    modes:
-      __DEFAULT__:
-        ros__parameters:
-          speed: 1.0
-          label: slow
-      FAST:
-        ros__parameters:
-          speed: 2.0
-          label: fast
-""" for name in names)
-    return load_model_text(f"""robot:
-  ros__parameters:
-    type: system
-    parts:
-{parts}
-    modes:
-      __DEFAULT__:
-{slow}
-      FAST:
-{fast}
-{nodes}""", "twenty.yaml", strict=True)
+    return load_model_text(flat_system_text(20), "twenty.yaml", strict=True)
 
 
 def test_a_node_failing_the_third_transition_of_a_twenty_node_change_rolls_everything_back() -> None:
@@ -155,19 +128,14 @@ def failing_changes(draw: st.DrawFn) -> tuple[Model, dict[str, Any], str, str, t
     """A generated model, where its nodes start, a mode request, a fault armed on one node, a policy."""
     generated: GeneratedModel = draw(generated_models())
     model = generated.load()
-    states: dict[str, Any] = {}
-    parameters: dict[str, Any] = {}
-    for node in model.nodes:
-        assert isinstance(node, NodePart)
-        states[node.name] = draw(st.sampled_from([State.UNCONFIGURED, State.INACTIVE, State.ACTIVE]))
-        parameters[node.name] = node.modes[draw(st.sampled_from(sorted(node.modes)))].values()
+    start = draw(node_starts(model))
     part = draw(st.sampled_from(sorted(model.parts)))
     mode = draw(st.sampled_from(sorted(model.parts[part].modes)))
     node = draw(st.sampled_from(sorted(n.name for n in model.nodes)))
     fault = (node, draw(st.sampled_from(FAULTS)), draw(st.sampled_from(["configure", "activate", "deactivate",
                                                                        "cleanup"])))
     policy = draw(st.sampled_from(["stay", "rollback"]))
-    return model, {"initial_state": states, "initial_parameters": parameters}, part, mode, fault, policy
+    return model, start, part, mode, fault, policy
 
 
 def check_failure_policy(model: Model, start: dict[str, Any], part: str, mode: str, fault: tuple[str, str, str],

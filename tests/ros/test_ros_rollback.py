@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 from lifecycle_msgs.srv import GetState
+from model_generator import flat_system_text
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from ros_processes import RosContext, Starter, wait_until
 
@@ -22,24 +23,7 @@ NAMES = [f"n{i:02d}" for i in range(20)]
 
 
 def write_model(path: Path) -> Path:
-    parts = "\n".join(f"      {name}" for name in NAMES)
-    fast = "\n".join(f"        {name}: active.FAST" for name in NAMES)
-    slow = "\n".join(f"        {name}: inactive" for name in NAMES)
-    nodes = "\n".join(f"""{name}:
-  ros__parameters:
-    type: node
-    modes:
-      __DEFAULT__:
-        ros__parameters:
-          speed: 1.0
-          label: slow
-      FAST:
-        ros__parameters:
-          speed: 2.0
-          label: fast
-""" for name in NAMES)
-    path.write_text(f"robot:\n  ros__parameters:\n    type: system\n    parts:\n{parts}\n    modes:\n"
-                    f"      __DEFAULT__:\n{slow}\n      FAST:\n{fast}\n{nodes}")
+    path.write_text(flat_system_text(len(NAMES)))
     return path
 
 

@@ -23,7 +23,8 @@ from hypothesis import strategies as st
 
 from sm_bt.bundled import path as bundled_path
 from sm_bt.model.loader import load_model, load_model_text
-from sm_bt.model.types import Model
+from sm_bt.model.states import State
+from sm_bt.model.types import Model, NodePart
 
 MODELS = Path(__file__).parents[1] / "models"
 Value = bool | int | float | str
@@ -324,3 +325,30 @@ def _add_cascade(draw: st.DrawFn, specs: dict[str, SystemSpec], parent: str, sub
         if m.name == x else m for m in parent_spec.modes)
     specs[sub] = SystemSpec(sub, sub_spec.parts, sub_spec.modes, (*sub_spec.rules, sub_rule))
     specs[parent] = SystemSpec(parent, parent_spec.parts, parent_modes, (*parent_spec.rules, parent_rule))
+
+
+def flat_system_text(count: int = 20) -> str:
+    """A system ``robot`` of ``count`` nodes ``n00``...: inactive in its default mode, all active in
+    ``FAST``; each node's modes differ in a float and a string (rollback tests, here and over ROS)."""
+    names = [f"n{i:02d}" for i in range(count)]
+    parts = "\n".join(f"      {name}" for name in names)
+    fast = "\n".join(f"        {name}: active.FAST" for name in names)
+    slow = "\n".join(f"        {name}: inactive" for name in names)
+    nodes = "".join(f"{name}:\n  ros__parameters:\n    type: node\n    modes:\n      __DEFAULT__:\n"
+                    "        ros__parameters:\n          speed: 1.0\n          label: slow\n      FAST:\n"
+                    "        ros__parameters:\n          speed: 2.0\n          label: fast\n" for name in names)
+    return (f"robot:\n  ros__parameters:\n    type: system\n    parts:\n{parts}\n    modes:\n"
+            f"      __DEFAULT__:\n{slow}\n      FAST:\n{fast}\n{nodes}")
+
+
+@st.composite
+def node_starts(draw: st.DrawFn, model: Model) -> dict[str, Any]:
+    """Where ``model``'s simulated nodes start: each one's state and one of its modes' values
+    (``SimulatedSystem``'s ``initial_state`` and ``initial_parameters``)."""
+    states: dict[str, Any] = {}
+    parameters: dict[str, Any] = {}
+    for node in model.nodes:
+        assert isinstance(node, NodePart)
+        states[node.name] = draw(st.sampled_from([State.UNCONFIGURED, State.INACTIVE, State.ACTIVE]))
+        parameters[node.name] = node.modes[draw(st.sampled_from(sorted(node.modes)))].values()
+    return {"initial_state": states, "initial_parameters": parameters}
