@@ -279,31 +279,21 @@ def preview(model: Model, config: Configuration, part: str, target: StateMode, d
         obs = observations[name]
         state = value.state
         mode = spec.modes[value.mode or spec.default_mode] if state is active else None
-        if obs.seen and not obs.gone and obs.state in primary:  # the usual case, inline
-            calls: tuple[str, ...] = ()
-            observed = None
-            if mode is not None and not mode.matches(obs.parameters):
-                calls, observed = (mode.set_label,), obs.parameters  # replaced, never updated: kept as it is
-            if obs.state is not state:
-                try:
-                    calls += tuple([edge.transition.label for edge in plan(obs.state, state)])
-                except PlanError as error:
-                    why.append(f"{name}: {error}")
-            elif not calls:
-                unchanged.append(name)
-            steps[name] = NodeSteps(name, actuals[name], _LABELS[state] if mode is None else mode.active_label,
-                                    calls, mode, observed)
-            continue
-        reach = out_of_reach(name, obs, value)
-        if reach:
-            why.append(reach)
-        elif not obs.seen:
-            waits.append(f"{name} to appear")
-        elif obs.state is not State.FINALIZED:
-            waits.append(f"{name} to end its transition ({obs.state.label})")
-        steps[name], cannot = node_steps(name, obs, state, mode, actuals[name] if obs.seen else "not seen yet")
+        reach = ""
+        if not obs.seen or obs.gone or obs.state not in primary:  # not the usual case: say why it waits or not
+            reach = out_of_reach(name, obs, value)
+            if reach:
+                why.append(reach)
+            elif not obs.seen:
+                waits.append(f"{name} to appear")
+            elif obs.state is not State.FINALIZED:
+                waits.append(f"{name} to end its transition ({obs.state.label})")
+        step, cannot = node_steps(name, obs, state, mode, actuals[name] if obs.seen else "not seen yet")
+        steps[name] = step
         if cannot and not reach:
             why.append(cannot)
+        elif not step.calls and obs.seen and not obs.gone and obs.state in primary:
+            unchanged.append(name)
     targets = _targets(root)
     unchanged.extend(name for name, value in targets.items()
                      if name not in steps and _there(actuals[name], value, model))
