@@ -62,10 +62,10 @@ class Hold:
     _holds: Holds | None = field(default=None, repr=False)
 
     def renew(self) -> None:
-        """Start the lease again (from now); nothing once it ended."""
-        holds = self._holds
-        if holds is not None:
-            holds.locked(lambda: holds.renew(self))
+        """Start the lease again (from now); nothing once it ended. Takes no lock (a tree renews on
+        every tick): it only moves ``expires``, which the lease's timer reads under the lock."""
+        if self._holds is not None:
+            self._holds.renew(self)
 
     def release(self) -> None:
         """End it now (its part keeps its target: nothing is asked of the nodes)."""
