@@ -52,7 +52,7 @@ test:
 stress: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)
 	SM_BT_TESTS_NEED_ALL=1 SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests/support \
-		$(BIN)/python -m pytest -q -s -p stress_summary \
+		$(BIN)/python -m pytest -q -s -p stress_summary --timeout=0 -o faulthandler_timeout=0 \
 		tests/engine/test_manager_properties.py tests/engine/test_preview.py tests/engine/test_rollback.py \
 		tests/engine/test_holds.py tests/model/test_model_fuzz.py tests/e2e/stress_partitions.py \
 		tests/e2e/stress_long_transitions.py tests/ros/test_ros_topics_property.py
@@ -80,7 +80,7 @@ interop: $(VENV)/.interop
 	SM_BT_REFERENCE="$$prefix" PYTHONPATH=tests/support:tests/interop \
 		$(BIN)/python tests/interop/harness.py --out build/interop && \
 	SM_BT_REFERENCE="$$prefix" SM_BT_TESTS_NEED_ALL=1 PYTHONPATH=tests/support \
-		$(BIN)/python -m pytest -q -p no:cacheprovider tests/interop/interop_cli.py tests/interop/interop_py_trees_ros.py
+		$(BIN)/python -m pytest -q -p no:cacheprovider --timeout=600 tests/interop/interop_cli.py tests/interop/interop_py_trees_ros.py
 
 $(VENV)/.interop: $(STAMP) pyproject.toml constraints.txt
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[interop]'
