@@ -11,6 +11,7 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+from ros_processes import line_within
 
 from sm_bt.cli import main
 
@@ -110,11 +111,11 @@ def test_view_serves_the_run_and_stays_until_ctrl_c(tmp_path: Path, tree: Path) 
                                 "--speed", "0", "--quiet", "--view", "0"], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
     try:
-        assert process.stderr is not None
-        first = process.stderr.readline()
+        first = line_within(process.stderr, 60.0, "sm-bt run --view: the view's address")
         assert first.startswith("view: http://127.0.0.1:"), first
         url = first.split(": ", 1)[1].strip()
-        assert process.stderr.readline() == f"run over; the view stays at {url} until Ctrl-C\n"
+        assert line_within(process.stderr, 60.0, "sm-bt run --view: the run's end") == (
+            f"run over; the view stays at {url} until Ctrl-C\n")
         with urllib.request.urlopen(url, timeout=5) as page:
             assert page.status == 200
     finally:

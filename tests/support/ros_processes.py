@@ -385,3 +385,17 @@ def communicate_or_dump(process: subprocess.Popen[str], timeout: float) -> tuple
             _, err = process.communicate(timeout=5.0)
         raise AssertionError(f"still running {timeout:g} s later; its threads were:\n{err[-6000:]}") from None
     return out, err
+
+
+def line_within(stream: IO[str] | None, timeout: float, what: str) -> str:
+    """The next line of a child's ``stream`` (``""`` at its end), or ``AssertionError(what)`` after
+    ``timeout`` s: a child that stalls before its line fails the test instead of holding it up (the
+    read goes on in a thread until the child is stopped)."""
+    assert stream is not None
+    got: list[str] = []
+    reader = threading.Thread(target=lambda: got.append(stream.readline()), name="line-within", daemon=True)
+    reader.start()
+    reader.join(timeout)
+    if not got:
+        raise AssertionError(f"{what}: no line within {timeout:g} s")
+    return got[0]

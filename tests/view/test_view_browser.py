@@ -37,6 +37,7 @@ from typing import Any
 
 import pytest
 from rich.console import Console
+from ros_processes import line_within
 
 from sm_bt.trees import pilot
 from sm_bt.trees.pilot.demo import Demo, Options
@@ -344,12 +345,11 @@ def test_a_quiet_demo_with_a_view_says_where_and_that_it_stays() -> None:
     demo = subprocess.Popen([str(script), "demo", "--speed", "0", "--quiet", "--cycles", "1", "--view", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        assert demo.stdout is not None
-        lines = [demo.stdout.readline() for _ in range(2)]
+        lines = [line_within(demo.stdout, 60.0, "sm-bt demo --view: its first lines") for _ in range(2)]
         assert lines[0].startswith("view: http://127.0.0.1:"), lines
         url = lines[0].split()[1]
         while not lines[-1].startswith("run over") and lines[-1]:
-            lines.append(demo.stdout.readline())
+            lines.append(line_within(demo.stdout, 60.0, "sm-bt demo --view: the run's end"))
         assert lines[-1].strip() == f"run over; the view stays at {url} until Ctrl-C", lines
         assert any(line.startswith("Summary") for line in lines)
         dom = _browse(url + "?check")  # no ?once: the page learns that the run is over from the server
