@@ -55,6 +55,7 @@ class EventKind(str, enum.Enum):
     REQUEST = "request"  # a request started or finished
     RULE = "rule"  # a rule fired
     FAILED = "failed"  # recovery gave up on a part
+    HOLD = "hold"  # a hold on the part began or ended (sm_bt.engine.holds)
 
 
 class Event(NamedTuple):

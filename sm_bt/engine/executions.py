@@ -33,6 +33,7 @@ from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.rollback import MODE_POLICY, Before, check_policy, reverse_plan, snapshot
 from sm_bt.engine.serialiser import Serialiser
+from sm_bt.engine.waiting import Waiting
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import NodePart
 
@@ -145,6 +146,8 @@ class Executions:
         self.shapes = Shapes(self.model)
         #: The holds in force (:mod:`sm_bt.engine.holds`); the manager makes them.
         self.holds = Holds(clock)
+        #: The requests waiting for holds to end (``queue=True``).
+        self.waiting = Waiting(clock, serialiser, self._end)
         self._ledger = ledger
         self._inference = ledger.inference
         self._divergences = divergences
@@ -181,26 +184,39 @@ class Executions:
 
     def start(self, part: str, target: StateMode, description: str, origin: Origin,
               timeout: float | None, transition: Transition | None = None, *, requester: str | None = None,
-              on_failure: str | None = None, priority: int | None = None) -> Request:
+              on_failure: str | None = None, priority: int | None = None, queue: bool = False,
+              queued: Request | None = None) -> Request:
         """Carry out a request for ``target`` of ``part`` (an active mode resolved); the request
         that preempts what it overlaps, or a refused one. ``on_failure``: a user request's failure
         policy (default: the manager's); ``priority``: its priority against the holds (default:
-        its requester's, :mod:`sm_bt.engine.holds`)."""
+        its requester's, :mod:`sm_bt.engine.holds`); ``queue``: held back by a hold, it waits
+        (:mod:`sm_bt.engine.waiting`) rather than being refused; ``queued``: such a request, now
+        free to start."""
         if self._serialiser.closed:  # detached from the backend: nothing it starts could ever end
-            return self.refuse(part, description, CLOSED, requester)
+            return self.refuse(part, description, CLOSED, requester, queued)
         implied = implied_targets(self.model, part, target)
         scope = frozenset(name for name, _ in implied if isinstance(self.model.parts[name], NodePart))
         overridden: list[Hold] = []
-        if origin is Origin.USER:
-            why = "; ".join(filter(None, (self._out_of_reach(n, t) for n, t in implied if n in scope)))
+        if origin is not Origin.RECOVERY:  # recovery restores the targets the holds set
+            why = ("; ".join(filter(None, (self._out_of_reach(n, t) for n, t in implied if n in scope)))
+                   if origin is Origin.USER else "")
             if not why and self.holds:
-                level = self.holds.priority_of(requester or Origin.USER.value, priority)
+                level = self.holds.priority_of(requester or origin.value, priority)
                 why = self.holds.refusal(dict(implied), level)
                 overridden = self.holds.overridden(dict(implied), level)
+                if why and queue:
+                    request = queued or Request(part, target, description, origin, self._clock.now(),
+                                                withdraw=self._withdraw, requester=requester)
+                    self.waiting.add(request, why, self.request_timeout if timeout is None else timeout,
+                                     lambda: self.holds.refusal(dict(implied), level),
+                                     lambda: self.start(part, target, description, origin, timeout, transition,
+                                                        requester=requester, on_failure=on_failure,
+                                                        priority=priority, queued=request))
+                    return request
             if why:  # refused as a whole: nothing is changed
-                return self.refuse(part, description, why, requester)
-        request = Request(part, target, description, origin, self._clock.now(), withdraw=self._withdraw,
-                          requester=requester)
+                return self.refuse(part, description, why, requester, queued)
+        request = queued or Request(part, target, description, origin, self._clock.now(), withdraw=self._withdraw,
+                                    requester=requester)
         # A rule's or recovery's request follows its own log line: the start is detail then.
         (log.info if origin is Origin.USER else log.debug)("request #%d %s started [%s]", request.id, description,
                                                            request.requester)
@@ -228,9 +244,10 @@ class Executions:
                 self._continue(execution, execution.scope - scope)
         return request
 
-    def refuse(self, part: str, description: str, reason: str, requester: str | None = None) -> Request:
+    def refuse(self, part: str, description: str, reason: str, requester: str | None = None,
+               queued: Request | None = None) -> Request:
         now = self._clock.now()
-        request = Request(part, StateMode(State.UNKNOWN), description, Origin.USER, now, requester=requester)
+        request = queued or Request(part, StateMode(State.UNKNOWN), description, Origin.USER, now, requester=requester)
         log.warning("request %s refused: %s", description, reason)
         request.refused = True
         request._finish(False, reason, now)
@@ -391,6 +408,8 @@ class Executions:
 
     def _withdraw(self, request: Request) -> None:
         with self._serialiser:
+            if self.waiting.withdraw(request):
+                return
             execution = self._executions.get(request.id)
             if execution is None:
                 return

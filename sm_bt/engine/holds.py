@@ -14,8 +14,15 @@ renewal (so a requester that died cannot pin the robot forever):
   that a hold needs elsewhere is refused too; two holds that need the same node in the same way
   share it.
 
-Rules' and recovery's requests compete with nobody here: recovery restores the targets the holds
-set. With no hold, nothing is refused: one requester behaves exactly as before.
+A rule that fires holds its new target at the rule's priority **while its condition lasts**: until
+its ``if_part`` is seen out of ``if_part_state``, or a request of the rule's priority or higher
+decides otherwise. When the rule's own target keeps the condition true (the pilot's degraded mode
+leaves the failed laser unconfigured, so nothing would ever tell that it is repaired), only such
+a request ends it: whoever knows the fault is over says so with a priority (``sm-bt mode set
+pilot f_normal_mode --priority 100``, ``priority="100"`` on a tree's ``ChangeMode``). Rule
+requests are admitted like any other, at the rule's priority. Recovery restores the targets the
+holds set and competes with nobody. With no hold, nothing is refused: one requester behaves
+exactly as before.
 """
 
 from __future__ import annotations
@@ -59,6 +66,8 @@ class Hold:
     reason: str = ""
     #: The change the hold asked for (made by :meth:`ModeManager.hold`).
     request: Request | None = None
+    #: A rule's hold lasts while this part is in this state (``None``: not a rule's).
+    condition: tuple[str, StateMode] | None = None
     _holds: Holds | None = field(default=None, repr=False)
 
     def renew(self) -> None:
@@ -81,8 +90,9 @@ class Hold:
     def describe(self, now: float, part: str | None = None) -> str:
         """Why a request for ``part`` (default: the held part) is refused."""
         held = self.part if part is None or part == self.part else f"{part} (a part of {self.part})"
+        lasts = f", while {self.condition[0]} is {self.condition[1]}" if self.condition is not None else ""
         return (f"{held} is held in {self.targets.get(part or self.part, self.target)} by {self.requester} "
-                f"(priority {self.priority}) since {now - self.since:.1f} s")
+                f"(priority {self.priority}) since {now - self.since:.1f} s{lasts}")
 
     def __str__(self) -> str:
         until = f", lease {self.lease:g} s" if self.lease is not None else ""
@@ -94,8 +104,13 @@ class Holds:
     manager's lock (a lease ends in the clock's thread)."""
 
     def __init__(self, clock: Clock, priorities: Mapping[str, int] | None = None,
-                 locked: Callable[[Callable[[], None]], None] | None = None) -> None:
+                 locked: Callable[[Callable[[], None]], None] | None = None,
+                 told: Callable[[Hold, str], None] | None = None) -> None:
         self._clock = clock
+        #: Told each hold that begins or ends, with a line that says so (the manager's events).
+        self.told = told or (lambda hold, text: None)
+        #: Called when a hold ends (queued requests may go ahead: :mod:`sm_bt.engine.waiting`).
+        self.ended: Callable[[], None] = lambda: None
         self.priorities = {**PRIORITIES, **(priorities or {})}
         #: Runs an action under the manager's lock (a lease ends in the clock's thread).
         self.locked = locked or (lambda action: action())
@@ -105,6 +120,7 @@ class Holds:
         # targets up here, or goes through the holds, whichever is fewer.
         self._by_part: dict[str, list[Hold]] = {}
         self._held_parts = 0
+        self._conditional: list[Hold] = []  # rules' holds
 
     def priority_of(self, requester: str, priority: int | None = None) -> int:
         return priority if priority is not None else self.priorities.get(requester, DEFAULT_PRIORITY)
@@ -150,17 +166,21 @@ class Holds:
     # -- life of a hold ---------------------------------------------------------------------------
 
     def add(self, part: str, target: StateMode, targets: Mapping[str, StateMode], requester: str, priority: int,
-            lease: float | None) -> Hold:
+            lease: float | None, condition: tuple[str, StateMode] | None = None) -> Hold:
         now = self._clock.now()
-        hold = Hold(part, target, requester, priority, now, lease, dict(targets), _holds=self)
+        hold = Hold(part, target, requester, priority, now, lease, dict(targets), condition=condition, _holds=self)
         self._holds[hold.id] = hold
         for name in hold.targets:
             self._by_part.setdefault(name, []).append(hold)
         self._held_parts += len(hold.targets)
+        if condition is not None:
+            self._conditional.append(hold)
         if lease is not None:
             hold.expires = now + lease
             self._arm(hold)
         log.info("%s: held", hold)
+        lasts = f", while {condition[0]} is {condition[1]}" if condition is not None else ""
+        self.told(hold, f"{part} held in {target} by {hold.holder()}{lasts}")
         return hold
 
     def renew(self, hold: Hold) -> None:
@@ -178,10 +198,23 @@ class Holds:
             if not holders:
                 del self._by_part[name]
         self._held_parts -= len(hold.targets)
+        if hold.condition is not None:
+            self._conditional.remove(hold)
         timer = self._timers.pop(hold.id, None)
         if timer is not None:
             timer.cancel()
         log.info("%s: %s", hold, reason)
+        self.told(hold, f"{hold.part} no longer held by {hold.requester}: {reason}")
+        self.ended()
+
+    def conditions_over(self, is_in: Callable[[str, StateMode], bool]) -> None:
+        """End the rules' holds whose condition no longer holds (``is_in(part, state)``: is the
+        part in that state now)."""
+        for hold in list(self._conditional):
+            assert hold.condition is not None
+            part, state = hold.condition
+            if not is_in(part, state):
+                self.end(hold, f"its condition is over: {part} is no longer {state}")
 
     def _arm(self, hold: Hold) -> None:
         assert hold.expires is not None

@@ -39,26 +39,20 @@ from sm_bt.engine.holds import Hold, Holds
 from sm_bt.engine.inference import Actual, Inference, NodeObservation
 from sm_bt.engine.ledger import Ledger
 from sm_bt.engine.lifecycle import (
-    REQUESTABLE,
-    REQUESTABLE_LABELS,
-    PlanError,
     Transition,
-    edge_for,
-    transition_by_label,
 )
 from sm_bt.engine.presence import NodeReports, NodeReturn
 from sm_bt.engine.preview import Configuration, Preview, preview
 from sm_bt.engine.reactions import Reactions
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.responses import Responses
-from sm_bt.engine.rollback import MODE_POLICY, check_policy
 from sm_bt.engine.serialiser import Serialiser
 from sm_bt.engine.settling import Settling
 from sm_bt.engine.snapshots import PartSnapshot
-from sm_bt.model.diagnostics import did_you_mean
+from sm_bt.engine.targets import check_node, check_part, failure_policy, mode_target, modes_of, state_target
 from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
-from sm_bt.model.types import DEFAULT_MODE, Model, NodePart, resolve_mode
+from sm_bt.model.types import DEFAULT_MODE, Model, NodePart
 
 __all__ = ["CLOSED", "REQUEST_TIMEOUT", "ModeManager", "NodeReturn"]
 
@@ -67,7 +61,6 @@ log = logging.getLogger("sm_bt.manager")
 REQUEST_TIMEOUT = 30.0
 
 #: The primary state each requestable transition leads to.
-_GOAL = {step.transition: step.goal for step in REQUESTABLE}
 
 
 class ModeManager:
@@ -108,10 +101,13 @@ class ModeManager:
         self._executions = Executions(self._ledger, self._divergences, self._reactions, self._drivers, self._serial,
                                       self.clock, request_timeout=request_timeout, renew_budgets=renew,
                                       on_failure=on_failure)
-        self._executions.holds = Holds(self.clock, priorities, locked=self._entered)
+        self._executions.holds = Holds(self.clock, priorities, locked=self._entered,
+                                       told=lambda hold, text: self._ledger.emit(EventKind.HOLD, hold.part, text))
+        self._executions.holds.ended = self._executions.waiting.hold_ended
         self._reports = NodeReports(self._ledger, self._divergences, self._executions, self._hierarchy,
                                     self._drivers, self._serial, self.clock, renew_budgets=renew)
-        self._serial.work = Settling(self._serial, self._divergences, self._responses, self._executions, self.clock)
+        self._serial.work = Settling(self._serial, self._divergences, self._responses, self._executions, self.clock,
+                                     self._inference.actual)
         with self._serial:
             backend.attach([node.name for node in model.nodes], self._reports)
 
@@ -189,8 +185,7 @@ class ModeManager:
 
     def available_modes(self, part: str) -> list[str]:
         """Every mode of ``part``, sorted byte-wise (as the reference's ``get_available_modes``)."""
-        self._check_part(part)
-        return sorted(self.model.parts[part].modes)
+        return modes_of(self.model, part)
 
     def reachable_modes(self, part: str) -> list[str]:
         """The modes of ``part`` that can still be reached with the nodes unavailable now
@@ -247,23 +242,24 @@ class ModeManager:
     # -- commands ---------------------------------------------------------------------------------
 
     def change_mode(self, part: str, mode: str, *, timeout: float | None = None, requester: str = "user",
-                    on_failure: str | None = None, priority: int | None = None) -> Request:
+                    on_failure: str | None = None, priority: int | None = None, queue: bool = False) -> Request:
         """Ask for ``part`` (system or node) to be active in ``mode`` (``__DEFAULT__`` names its
         default mode). Returns at once. :class:`RequestError` for a part or mode the model does not
         have, or an empty mode name. ``requester`` says who asks, for logs and narratives
         (:attr:`Request.requester`: sm_bt's behaviours say ``"tree"``); ``on_failure``: this
         request's failure policy (default: the manager's); ``priority``: against the parts'
-        holds (default: the requester's): a part held at a higher one refuses the request."""
+        holds (default: the requester's): a part held at a higher one refuses the request, or
+        with ``queue`` makes it wait until the hold ends or its ``timeout`` runs out."""
         if not mode:
             raise RequestError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
                                "for the default mode)")
         with self._serial:
             return self._request(part, StateMode(State.ACTIVE, mode), f"change_mode {part} {mode}", timeout,
-                                 requester, on_failure, priority)
+                                 requester, on_failure, priority, queue)
 
     def change_state(self, part: str, transition: Transition | str | int, *,
                      timeout: float | None = None, requester: str = "user", on_failure: str | None = None,
-                     priority: int | None = None) -> Request:
+                     priority: int | None = None, queue: bool = False) -> Request:
         """Ask for a lifecycle transition of ``part`` (system or node): ``"configure"``,
         ``"activate"``, ``Transition.DEACTIVATE``, ... Returns at once. A settled part must be in
         a state the transition is valid from (as a lifecycle node requires), or already in its
@@ -271,16 +267,16 @@ class ModeManager:
         transition is accepted and its goal state becomes the new target. Activation keeps the
         last mode asked for. :class:`RequestError` for a part the model does not have, or a
         transition that does not exist or cannot be requested; one not valid from where the part
-        is now is a refused request. ``on_failure``, ``priority``: as :meth:`change_mode`'s."""
+        is now is a refused request. ``on_failure``, ``priority``, ``queue``: as :meth:`change_mode`'s."""
         with self._serial:
             self._check_part(part)
-            description, target, resolved, refusal = self._state_target(
+            description, target, resolved, refusal = self._change_state_target(
                 part, transition, self._inference.actual(part).state, self._moving(part))
             if refusal:
                 return self._executions.refuse(part, description, refusal, requester)
             return self._executions.start(part, target, description, Origin.USER, timeout, resolved,
-                                          requester=requester, on_failure=self._policy(part, on_failure),
-                                          priority=priority)
+                                          requester=requester, on_failure=failure_policy(self.model, part, on_failure),
+                                          priority=priority, queue=queue)
 
     def preview(self, part: str, mode: str, *, from_: Configuration | None = None) -> Preview:
         """The plan ``change_mode(part, mode)`` would be carried out by now, without doing anything:
@@ -289,7 +285,7 @@ class ModeManager:
         from that configuration instead (:func:`~sm_bt.engine.preview.configuration`; offline)."""
         description = f"change_mode {part} {mode}"
         with self._serial:
-            target = self._mode_target(part, StateMode(State.ACTIVE, mode or DEFAULT_MODE), description)
+            target = mode_target(self.model, part, StateMode(State.ACTIVE, mode or DEFAULT_MODE), description)
             return self._preview(part, target, description, "", from_)
 
     def preview_state(self, part: str, transition: Transition | str | int, *,
@@ -299,7 +295,7 @@ class ModeManager:
             self._check_part(part)
             config = from_ or Configuration(self._inference)
             current = config.actual(part).state
-            description, target, _, refusal = self._state_target(part, transition, current,
+            description, target, _, refusal = self._change_state_target(part, transition, current,
                                                                   from_ is None and self._moving(part))
             if target.state is State.ACTIVE and from_ is not None:
                 target = StateMode(State.ACTIVE, self.model.parts[part].default_mode)
@@ -317,31 +313,9 @@ class ModeManager:
         return preview(self.model, from_ or Configuration(self._inference), part, target, description, refusal,
                        shapes=self._executions.shapes)
 
-    def _state_target(self, part: str, transition: Transition | str | int, current: State,
-                      moving: bool) -> tuple[str, StateMode, Transition, str]:
-        """``change_state``'s description, target, transition, and why it is refused ("" if not)."""
-        name = transition.label if isinstance(transition, Transition) else str(transition)
-        description = f"change_state {part} {name}"
-        try:
-            resolved = self._resolve_transition(transition, current)
-        except ValueError as error:
-            raise RequestError(f"{description}: {error} (transitions: {', '.join(REQUESTABLE_LABELS)})"
-                               f"{did_you_mean(name, REQUESTABLE_LABELS)}") from None
-        if resolved not in _GOAL:
-            raise RequestError(f"{description}: {resolved.label} ({int(resolved)}) cannot be requested "
-                               f"(transitions: {', '.join(REQUESTABLE_LABELS)})")
-        goal = _GOAL[resolved]
-        refusal = ""
-        try:
-            if current.is_primary and goal is not current and not moving:
-                edge_for(current, resolved)  # raises with the valid ones when invalid here
-        except PlanError as error:
-            refusal = f"{part}: {error}"
-        mode = self._ledger.mode_for_activation(part) if goal is State.ACTIVE else None
-        return description, StateMode(goal, mode), resolved, refusal
-
     def change_to(self, part: str, target: StateMode | str, *, timeout: float | None = None,
-                  requester: str = "user", on_failure: str | None = None, priority: int | None = None) -> Request:
+                  requester: str = "user", on_failure: str | None = None, priority: int | None = None,
+                  queue: bool = False) -> Request:
         """Ask for ``part`` to reach ``target`` (``"active.FAST"``, ``"inactive"``, a
         :class:`StateMode`), whatever it is in now: the plan takes every lifecycle step needed.
         Used to put a part back where it was (for instance after holding a mode). Returns at once.
@@ -356,7 +330,7 @@ class ModeManager:
             if wanted.state not in (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE):
                 raise RequestError(f"{description}: {wanted.state.label} is not a state to ask for "
                                    "(unconfigured, inactive or active)")
-            return self._request(part, wanted, description, timeout, requester, on_failure, priority)
+            return self._request(part, wanted, description, timeout, requester, on_failure, priority, queue)
 
     def hold(self, part: str, mode: str, *, requester: str = "user", priority: int | None = None,
              lease: float | None = None, timeout: float | None = None) -> Hold:
@@ -368,7 +342,7 @@ class ModeManager:
         ``reason`` says why)."""
         description = f"hold {part} {mode} [{requester}]"
         with self._serial:
-            target = self._mode_target(part, StateMode(State.ACTIVE, mode or DEFAULT_MODE), description)
+            target = mode_target(self.model, part, StateMode(State.ACTIVE, mode or DEFAULT_MODE), description)
             request = self._executions.start(part, target, f"change_mode {part} {mode}", Origin.USER, timeout,
                                              requester=requester, priority=priority)
             holds = self._executions.holds
@@ -403,6 +377,7 @@ class ModeManager:
             for execution in self._executions.in_progress():
                 self._executions.finish(execution, False, CLOSED)
             self._responses.cancel()
+            self._executions.waiting.close(CLOSED)
             self._executions.holds.close()
             self._serial.closed = True
             self.backend.detach()
@@ -410,47 +385,22 @@ class ModeManager:
     # -- requests -----------------------------------------------------------------------------------
 
     def _request(self, part: str, wanted: StateMode, description: str, timeout: float | None,
-                 requester: str, on_failure: str | None = None, priority: int | None = None) -> Request:
+                 requester: str, on_failure: str | None = None, priority: int | None = None,
+                 queue: bool = False) -> Request:
         """Start a user request for ``wanted`` (an active mode resolved: ``__DEFAULT__`` is the
         default mode); :class:`RequestError` with the part's real names for one it does not have."""
-        wanted = self._mode_target(part, wanted, description)
+        wanted = mode_target(self.model, part, wanted, description)
         return self._executions.start(part, wanted, description, Origin.USER, timeout, requester=requester,
-                                      on_failure=self._policy(part, on_failure), priority=priority)
+                                      on_failure=failure_policy(self.model, part, on_failure), priority=priority,
+                                      queue=queue)
+
+    def _change_state_target(self, part: str, transition: Transition | str | int, current: State,
+                             moving: bool) -> tuple[str, StateMode, Transition, str]:
+        return state_target(part, transition, current, moving, self._ledger.mode_for_activation(part))
 
     def _entered(self, action: Callable[[], None]) -> None:
         with self._serial:
             action()
-
-    def _policy(self, part: str, on_failure: str | None) -> str | None:
-        """``on_failure`` checked: a policy, and a safe mode the part has (:class:`RequestError`)."""
-        if on_failure is None:
-            return None
-        try:
-            check_policy(on_failure)
-        except ValueError as error:
-            raise RequestError(str(error)) from None
-        if on_failure.startswith(MODE_POLICY):
-            mode = on_failure[len(MODE_POLICY):]
-            resolved = resolve_mode(self.model.parts[part], mode)
-            if resolved is None:
-                modes = self.available_modes(part)
-                raise RequestError(f"on_failure={on_failure!r}: {part} has no mode {mode!r}"
-                                   f"{did_you_mean(mode, modes)} (modes: {', '.join(modes)})")
-            return f"{MODE_POLICY}{resolved}"
-        return on_failure
-
-    def _mode_target(self, part: str, wanted: StateMode, description: str) -> StateMode:
-        """``wanted`` with an active mode resolved (``__DEFAULT__``: the default mode);
-        :class:`RequestError` with the part's real names for a part or mode it does not have."""
-        self._check_part(part)
-        if wanted.state is State.ACTIVE:
-            resolved = resolve_mode(self.model.parts[part], wanted.mode or DEFAULT_MODE)
-            if resolved is None:
-                modes = self.available_modes(part)
-                raise RequestError(f"{description}: unknown mode {wanted.mode!r} of {part}"
-                                   f"{did_you_mean(wanted.mode or '', modes)} (modes: {', '.join(modes)})")
-            wanted = StateMode(State.ACTIVE, resolved)
-        return wanted
 
     # -- reachability ---------------------------------------------------------------------------
 
@@ -473,19 +423,7 @@ class ModeManager:
         return node in self._reactions.gave_up or not obs.reachable or obs.state is State.FINALIZED
 
     def _check_part(self, part: str) -> None:
-        if part not in self.model.parts:
-            raise RequestError(f"unknown part {part!r}{did_you_mean(part, self.model.parts)} "
-                               f"(parts: {', '.join(self.model.parts)})")
+        check_part(self.model, part)
 
     def _check_node(self, node: str) -> None:
-        self._check_part(node)
-        if not isinstance(self.model.parts[node], NodePart):
-            raise RequestError(f"{node} is a system, not a node (nodes: {', '.join(n.name for n in self.model.nodes)})")
-
-    @staticmethod
-    def _resolve_transition(transition: Transition | str | int, current: State) -> Transition:
-        if isinstance(transition, Transition):
-            return transition
-        if isinstance(transition, int):
-            return Transition(transition)
-        return transition_by_label(transition, current)
+        check_node(self.model, node)

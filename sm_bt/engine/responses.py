@@ -34,6 +34,9 @@ class Reaction:
     target: StateMode
     description: str
     origin: Origin
+    #: A rule's: who asks (``rule NAME``), and the condition its hold lasts for (part, state).
+    requester: str | None = None
+    condition: tuple[str, StateMode] | None = None
 
 
 class Responses:
@@ -79,7 +82,7 @@ class Responses:
                 log.info("%s: %s (attempt %d of %d)", rule.system, message, action.attempt, attempts)
                 self._ledger.emit(EventKind.RULE, rule.system, message)
                 started.append(Reaction(rule.system, rule.new_target, f"rule {rule.name} of {rule.system}",
-                                        Origin.RULE))
+                                        Origin.RULE, f"rule {rule.name}", (rule.if_part, rule.if_part_state)))
             elif isinstance(action, Restore):
                 log.warning("restoring %s to %s (attempt %d of %d)", action.node, action.target, action.attempt,
                             attempts)

@@ -5,12 +5,17 @@ the reactions to faults, which may put more on the agenda, until nothing is left
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 
 from sm_bt.engine.clock import Clock
 from sm_bt.engine.divergences import Divergences
 from sm_bt.engine.executions import Executions
-from sm_bt.engine.responses import Responses
+from sm_bt.engine.hierarchy import implied_targets
+from sm_bt.engine.inference import Actual
+from sm_bt.engine.requests import Origin
+from sm_bt.engine.responses import Reaction, Responses
 from sm_bt.engine.serialiser import Serialiser
+from sm_bt.model.states import StateMode
 
 log = logging.getLogger("sm_bt.manager")
 
@@ -21,10 +26,11 @@ MAX_PASSES = 100_000
 class Settling:
     """The manager's work, for its :class:`~sm_bt.engine.serialiser.Serialiser`."""
 
-    __slots__ = ("_clock", "_divergences", "_executions", "_responses", "_serial")
+    __slots__ = ("_actual", "_clock", "_divergences", "_executions", "_responses", "_serial")
 
     def __init__(self, serial: Serialiser, divergences: Divergences, responses: Responses, executions: Executions,
-                 clock: Clock) -> None:
+                 clock: Clock, actual: Callable[[str], Actual]) -> None:
+        self._actual = actual
         self._serial = serial
         self._divergences = divergences
         self._responses = responses
@@ -45,6 +51,22 @@ class Settling:
             changes, faults = self._divergences.evaluate(now)
             for change in changes:
                 self._responses.changed(change.part, change.new, now)
+            holds = self._executions.holds
+            if changes and holds:
+                holds.conditions_over(self._is_in)
             for reaction in self._responses.react(faults) if faults else ():
-                self._executions.start(reaction.part, reaction.target, reaction.description, reaction.origin, None)
+                self._start(reaction)
         log.error("the manager did not settle after %d passes; stopped to stay responsive", MAX_PASSES)
+
+    def _start(self, reaction: Reaction) -> None:
+        """Start a rule's or recovery's request; a rule's holds its target while its condition lasts."""
+        executions = self._executions
+        level = executions.holds.priority_of(Origin.RULE.value)
+        request = executions.start(reaction.part, reaction.target, reaction.description, reaction.origin, None,
+                                   requester=reaction.requester, priority=level)
+        if reaction.condition is not None and not request.refused and self._is_in(*reaction.condition):
+            executions.holds.add(reaction.part, reaction.target, dict(implied_targets(executions.model, reaction.part,
+                                 reaction.target)), request.requester, level, None, reaction.condition)
+
+    def _is_in(self, part: str, state: StateMode) -> bool:
+        return self._actual(part).is_(state)

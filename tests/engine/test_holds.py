@@ -78,6 +78,8 @@ def test_a_hold_refused_by_a_higher_one_is_not_made_and_a_release_ends_one() -> 
 # -- properties ------------------------------------------------------------------------------------
 
 REQUESTERS = ("tree", "metacontroller", "operator", "rule")
+#: A queued request's own timeout in the property (shorter than a run).
+QUEUE_TIMEOUT = 4.0
 
 
 @st.composite
@@ -96,7 +98,8 @@ def held_runs(draw: st.DrawFn) -> tuple[Model, list[tuple[Any, ...]]]:
             requester = draw(st.sampled_from(REQUESTERS))
             priority = draw(st.one_of(st.none(), st.sampled_from([10, 50, 90])))
             lease = draw(st.one_of(st.none(), st.floats(0.5, 5.0))) if kind == "hold" else None
-            steps.append((kind, part, mode, requester, priority, lease))
+            queue = kind == "request" and draw(st.booleans())
+            steps.append((kind, part, mode, requester, priority, lease, queue))
         elif kind == "run":
             steps.append((kind, draw(st.floats(0.05, 3.0))))
         else:
@@ -108,16 +111,21 @@ def check_holds(model: Model, steps: list[tuple[Any, ...]]) -> None:
     system = SimulatedSystem(model, rules=False, recovery=False)
     manager = system.manager
     made = []
+    queued = []
     for step in steps:
         if step[0] in ("hold", "request"):
-            _, part, mode, requester, priority, lease = step
+            _, part, mode, requester, priority, lease, queue = step
             before = manager.holds()
             if step[0] == "hold":
                 hold = manager.hold(part, mode, requester=requester, priority=priority, lease=lease)
                 made.append(hold)
                 request = hold.request
             else:
-                request = manager.change_mode(part, mode, requester=requester, priority=priority)
+                request = manager.change_mode(part, mode, requester=requester, priority=priority, queue=queue,
+                                              timeout=QUEUE_TIMEOUT if queue else None)
+                if queue:
+                    assert "is held in" not in request.reason  # it waits instead
+                    queued.append((request, manager.clock.now()))
             assert request is not None
             level = priority if priority is not None else PRIORITIES.get(requester, DEFAULT_PRIORITY)
             held_higher = [h for h in before if h.priority > level and h.active]
@@ -137,6 +145,12 @@ def check_holds(model: Model, steps: list[tuple[Any, ...]]) -> None:
                 assert manager.target(part) == target, (hold, part, manager.target(part), target)
             # An expired lease has freed its part by now (its timer runs on the manager's clock).
             assert hold.expires is None or hold.expires > now - 1e-9, (hold, now)
+    # No request waits forever: each queued one started, or failed at its own timeout.
+    system.run(QUEUE_TIMEOUT + 1.0)
+    for request, asked in queued:
+        assert request.done, (request, request.feedback)
+        if request.reason.startswith("still held"):
+            assert request.finished is not None and request.finished - asked <= QUEUE_TIMEOUT + 1e-6
 
 
 @examples(200, stress=10_000)
@@ -231,3 +245,113 @@ def test_who_holds_a_part_is_in_its_status_and_its_diagnostic() -> None:
     assert values["held_by"] == f"metacontroller (priority 60, until {expires} s)"
     hold.release()
     assert system.manager.status("pilot").held_by == ""
+
+
+# -- a rule's target is a hold while its condition lasts -------------------------------------------
+
+
+def laser_lost() -> tuple[SimulatedSystem, Any]:
+    """pilot_rules in normal mode; the laser fails as the real node does (deactivate ->
+    errorprocessing -> unconfigured) and the rule degrade_from_normal sends the pilot to degraded
+    mode; the rule's hold."""
+    from sm_bt.engine.lifecycle import Outcome, Transition
+
+    system = SimulatedSystem(bundled("pilot_rules"), recovery=False)
+    system.finish(system.manager.change_mode("pilot", "f_normal_mode", requester="tree"))
+    system.backend.trigger("laser_resender", Transition.DEACTIVATE, Outcome.ERROR)
+    system.run(5.0)
+    assert str(system.manager.actual("pilot")) == "active.f_degraded_mode"
+    [hold] = system.manager.holds()
+    return system, hold
+
+
+def test_a_rule_holds_its_target_against_the_trees_routine_changes_while_its_condition_lasts() -> None:
+    system, hold = laser_lost()
+    assert (hold.part, str(hold.target), hold.requester, hold.priority, hold.lease) == (
+        "pilot", "active.f_degraded_mode", "rule degrade_from_normal", PRIORITIES["rule"], None)
+    assert system.manager.status("pilot").held_by == "rule degrade_from_normal (priority 100)"
+    system.run(3.0)
+    for mode in ("f_energy_saving_mode", "f_normal_mode"):  # the tree's routine: refused, nothing moves
+        refused = system.manager.change_mode("pilot", mode, requester="tree")
+        assert refused.refused and refused.reason.startswith(
+            "pilot is held in active.f_degraded_mode by rule degrade_from_normal (priority 100) since "), refused.reason
+        assert refused.reason.endswith(" s, while laser_resender is unconfigured"), refused.reason
+    operator = system.manager.change_mode("pilot", "f_normal_mode", requester="operator")
+    assert operator.refused  # 80 < 100
+    assert str(system.manager.actual("pilot")) == "active.f_degraded_mode" and hold.active
+    # Whoever knows the laser is repaired says so at the rule's priority: the last request wins.
+    back = system.finish(system.manager.change_mode("pilot", "f_normal_mode", requester="tree", priority=100))
+    assert back.succeeded and not hold.active and hold.reason.startswith(f"superseded by request #{back.id}")
+    assert system.manager.holds() == []
+
+
+def test_a_rules_hold_ends_when_its_condition_is_over() -> None:
+    from sm_bt.engine.lifecycle import Transition
+
+    system, hold = laser_lost()
+    system.backend.trigger("laser_resender", Transition.CONFIGURE)  # brought up from outside
+    system.run(1.0)
+    assert not hold.active and hold.reason == "its condition is over: laser_resender is no longer unconfigured"
+    assert system.finish(system.manager.change_mode("pilot", "f_normal_mode", requester="tree")).succeeded
+
+
+def test_a_rule_does_not_fire_against_a_hold_of_a_higher_priority_and_overrides_lower_ones() -> None:
+    from sm_bt.engine.lifecycle import Outcome, Transition
+
+    for priority, fires in ((PRIORITIES["rule"] + 1, False), (PRIORITIES["operator"], True)):
+        system = SimulatedSystem(bundled("pilot_rules"), recovery=False)
+        held = system.manager.hold("pilot", "f_normal_mode", requester="operator", priority=priority)
+        system.finish(held.request)
+        system.backend.trigger("laser_resender", Transition.DEACTIVATE, Outcome.ERROR)
+        system.run(5.0)
+        assert (str(system.manager.actual("pilot")) == "active.f_degraded_mode") is fires
+        assert held.active is not fires
+        assert [h.requester for h in system.manager.holds()] == (["rule degrade_from_normal"] if fires
+                                                                 else ["operator"])
+
+
+# -- queue=True: waiting for a hold to end ---------------------------------------------------------
+
+
+def test_a_queued_request_waits_for_the_hold_and_starts_when_it_ends() -> None:
+    system = pilot()
+    hold = system.manager.hold("pilot", "f_degraded_mode", requester="operator", lease=3.0)
+    system.finish(hold.request)
+    queued = system.manager.change_mode("pilot", "f_slow_mode", requester="tree", queue=True, timeout=10.0)
+    assert not queued.done and not queued.refused
+    assert queued.feedback.startswith("queued: pilot is held in active.f_degraded_mode by operator (priority 80)")
+    system.run(2.0)
+    assert not queued.done and str(system.manager.actual("pilot")) == "active.f_degraded_mode"
+    system.run(2.0)  # the lease ran out: it starts, as if asked for now
+    assert not hold.active and system.finish(queued).succeeded
+    assert str(system.manager.actual("pilot")) == "active.f_slow_mode"
+
+
+def test_a_queued_request_fails_at_its_timeout_naming_the_holder_and_can_be_cancelled() -> None:
+    system = pilot()
+    hold = system.manager.hold("pilot", "f_degraded_mode", requester="operator")
+    system.finish(hold.request)
+    queued = system.manager.change_mode("pilot", "f_slow_mode", requester="tree", queue=True, timeout=5.0)
+    system.run(6.0)
+    assert queued.done and not queued.succeeded and not queued.refused
+    assert queued.reason.startswith("still held after 5 s: pilot is held in active.f_degraded_mode by operator")
+    cancelled = system.manager.change_mode("pilot", "f_slow_mode", requester="tree", queue=True)
+    cancelled.cancel()
+    assert cancelled.done and cancelled.reason == "cancelled"
+    hold.release()
+    system.run(1.0)
+    assert str(system.manager.actual("pilot")) == "active.f_degraded_mode"  # neither went ahead
+    # Not held: a queued request starts at once, as any other.
+    assert system.finish(system.manager.change_mode("pilot", "f_slow_mode", queue=True)).succeeded
+
+
+def test_queued_requests_go_in_the_order_they_came_and_the_last_one_wins() -> None:
+    system = pilot()
+    hold = system.manager.hold("pilot", "f_degraded_mode", requester="operator")
+    system.finish(hold.request)
+    first = system.manager.change_mode("pilot", "f_slow_mode", requester="tree", queue=True, timeout=30.0)
+    second = system.manager.change_mode("pilot", "f_performance_mode", requester="tree", queue=True, timeout=30.0)
+    hold.release()
+    system.run(5.0)
+    assert first.done and not first.succeeded and first.reason.startswith(f"preempted by request #{second.id}")
+    assert second.succeeded and str(system.manager.actual("pilot")) == "active.f_performance_mode"

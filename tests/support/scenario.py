@@ -64,6 +64,7 @@ from sm_bt.behaviours import ChangeState as ChangeStateBehaviour
 from sm_bt.behaviours import HoldMode, WaitForMode, hold_mode
 from sm_bt.engine.backend import BackendListener, NodeReport
 from sm_bt.engine.events import Event, EventKind
+from sm_bt.engine.holds import PRIORITIES
 from sm_bt.engine.inference import infer_all
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, Outcome, transition_by_label
 from sm_bt.engine.manager import ModeManager
@@ -644,8 +645,10 @@ class _Runner:
                 backend.trigger(action.node, valid[action.choice % len(valid)], Outcome(action.outcome),
                                 Outcome(action.on_error))
 
-    def request(self, action: RequestAction, timeout: float | None = None) -> Request | None:
-        """Make the request; ``None`` when the manager raised (a name the model does not have: I1)."""
+    def request(self, action: RequestAction, timeout: float | None = None,
+                priority: int | None = None) -> Request | None:
+        """Make the request (at ``priority``: default the user's); ``None`` when the manager raised
+        (a name the model does not have: I1)."""
         manager = self.manager
         timeout = action.timeout if timeout is None else timeout
         targets = {part: manager.target(part) for part in self.model.parts}
@@ -653,11 +656,11 @@ class _Runner:
         invalid = invalid_by_name(self.model, action)
         try:
             if isinstance(action, ChangeMode):
-                request = manager.change_mode(action.part, action.mode, timeout=timeout)
+                request = manager.change_mode(action.part, action.mode, timeout=timeout, priority=priority)
             elif isinstance(action, ChangeState):
-                request = manager.change_state(action.part, action.transition, timeout=timeout)
+                request = manager.change_state(action.part, action.transition, timeout=timeout, priority=priority)
             else:
-                request = manager.change_to(action.part, action.target, timeout=timeout)
+                request = manager.change_to(action.part, action.target, timeout=timeout, priority=priority)
         except RequestError as error:
             if not invalid:
                 self._violate(I1RequestEnds, f"{action} raised although the model has every name it uses: {error}")
@@ -736,7 +739,9 @@ class _Runner:
         # news of the old one's end may still be on its way too, and fail a request made now (the
         # manager cannot tell that its calls reached the new process).
         stale |= {node for node in needed if node in self.renewing}
-        request = self.request(final, FINAL_TIMEOUT)
+        # At the rules' priority: a rule's hold lasts while its condition does, which a request of
+        # its priority ends (holds.py); below it, a refusal naming the rule is the right answer.
+        request = self.request(final, FINAL_TIMEOUT, priority=PRIORITIES["rule"])
         assert request is not None, f"the final request {final} is not a valid one"
         self.advance(self.clock.now() + FINAL_TIMEOUT + 1.0, stop=lambda: request.done)
         missing = [node for node, wanted in needed.items()
