@@ -43,7 +43,8 @@ class Row:
     ``raw_state``/``raw_mode`` are the actual values, ``state_inferred``/``mode_inferred`` say
     whether they were inferred; ``actual_state``/``actual_mode`` add the ``(*)`` marker for
     display. ``cause`` and ``since`` describe the divergence (``None`` when on target), ``error``
-    is true when it is beyond the grace period and unexplained (fault or override).
+    is true when it is beyond the grace period and unexplained (fault or override). ``held_by``:
+    who holds the part (:mod:`~sm_bt.engine.holds`; "" when nobody).
     """
 
     part: str
@@ -57,6 +58,7 @@ class Row:
     cause: Cause | None = None
     since: float | None = None
     error: bool = False
+    held_by: str = ""
 
     @property
     def actual_state(self) -> str:
@@ -88,6 +90,7 @@ def snapshot(manager: ModeManager) -> list[Row]:
             cause=divergence.cause if divergence else None,
             since=divergence.since if divergence else None,
             error=divergence is not None and divergence.is_error,
+            held_by=status.held_by,
         ))
     return rows
 
@@ -106,7 +109,17 @@ def render_text(rows: list[Row]) -> str:
         mark = "! " if row.diverges else "  "
         lines.append(mark + "  ".join(t.ljust(widths[i]) for i, t in enumerate(text)).rstrip())
     lines.append(" (*) = inferred    ! = diverges from target")
+    lines.extend(f" held by {holder}: {', '.join(parts)}" for holder, parts in held(rows).items())
     return "\n".join(lines)
+
+
+def held(rows: list[Row]) -> dict[str, list[str]]:
+    """Who holds which parts (in the rows' order), for the lines under the table."""
+    holders: dict[str, list[str]] = {}
+    for row in rows:
+        if row.held_by:
+            holders.setdefault(row.held_by, []).append(row.part)
+    return holders
 
 
 #: Wide enough that rich never wraps a line of ours when writing to a pipe or a file.
@@ -168,7 +181,10 @@ def _value(raw: str, inferred: bool) -> Text:
 def render_rich(rows: list[Row], *, title: str | None = None) -> Table:
     """The table for a rich console: a ``systems`` section then a ``nodes`` section, ``(*)`` kept
     (dimmed), each diverging row styled by :func:`row_style`, and the legend as caption."""
-    table = Table(title=title, caption=legend(), box=box.SIMPLE_HEAD, caption_justify="left",
+    caption = legend()
+    for holder, parts in held(rows).items():
+        caption.append(f"\nheld by {holder}: {', '.join(parts)}")
+    table = Table(title=title, caption=caption, box=box.SIMPLE_HEAD, caption_justify="left",
                   pad_edge=False)
     table.add_column("", no_wrap=True, min_width=1)
     # Narrow terminals fold long names rather than cut them: every character of a mode name counts.
@@ -210,6 +226,7 @@ def _json_row(row: Row, epoch: float) -> dict[str, Any]:
         "state_inferred": row.state_inferred,
         "mode_inferred": row.mode_inferred,
         "divergence": divergence,
+        "held_by": row.held_by or None,
     }
 
 

@@ -55,6 +55,7 @@ def add_mode_arguments(parser: argparse.ArgumentParser) -> None:
     put.add_argument("--dry-run", action="store_true",
                      help="ask sm-bt manager what the change would do, and do nothing: the plan (stages, calls, "
                           "parameters), or why it would be refused (exit 1)")
+    _who(put)
     for child in (get, listed):
         _common(child)
     _common(put, waits=True)
@@ -76,8 +77,29 @@ def add_state_arguments(parser: argparse.ArgumentParser) -> None:
     put.add_argument("--force", action="store_true",
                      help="send it to a node that a mode manager manages: the manager takes a change it did "
                           "not ask for as a fault and puts the node back after its grace period")
+    _who(put)
     _common(get)
     _common(put, waits=True)
+
+
+def _priority(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a priority (a whole number, 0 or more)")
+    return value
+
+
+def _who(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--requester", metavar="NAME",
+                        help="who asks (default: the manager's, operator unless `sm-bt manager --requester` says "
+                             "otherwise); needs sm-bt manager")
+    parser.add_argument("--priority", type=_priority, metavar="N",
+                        help="the request's priority against the holds (default: the requester's: rule 100, "
+                             "operator 80, metacontroller 60, tree 40); a part held at a higher one refuses it, "
+                             "naming the holder; needs sm-bt manager")
 
 
 def _client(args: argparse.Namespace) -> AbstractContextManager[Any]:
@@ -136,8 +158,13 @@ def run_mode(args: argparse.Namespace) -> int:
             possible, lines = client.preview_change(part, mode=args.mode)
             print("\n".join(lines))
             return 0 if possible else 1
-        if not client.change_mode(part, args.mode):
-            raise CliError(f"the manager refused mode {args.mode!r} for {part} (its log says why)")
+        if args.priority is not None or args.requester is not None or client.offers(part, "request_change"):
+            accepted, reason = client.request_change(part, mode=args.mode, requester=args.requester or "",
+                                                     priority=-1 if args.priority is None else args.priority)
+        else:  # the reference's manager: yes or no
+            accepted, reason = client.change_mode(part, args.mode), "its log says why"
+        if not accepted:
+            raise CliError(f"the manager refused mode {args.mode!r} for {part}: {reason}")
         if not args.wait:
             print(f"{part}: change to {args.mode} accepted")
             return 0
@@ -156,6 +183,12 @@ def run_state(args: argparse.Namespace) -> int:
         return 0
 
     def put(client: Any) -> int:
+        if args.priority is not None or args.requester is not None:  # through sm-bt manager, always
+            accepted, reason = client.request_change(part, transition=args.transition, requester=args.requester or "",
+                                                     priority=-1 if args.priority is None else args.priority)
+            if not accepted:
+                raise CliError(f"the manager refused the transition {args.transition!r} for {part}: {reason}")
+            return _confirm_state(client, args, part, managed=False)
         managed = client.managed_node(part)
         if managed and not args.force:
             raise CliError(f"{part} is a node that a mode manager manages: it would take a transition it did not ask "
@@ -163,17 +196,23 @@ def run_state(args: argparse.Namespace) -> int:
                            f"state or mode, or `sm-bt mode set {part} MODE`), or add --force to send it anyway")
         if not client.change_state(part, args.transition):
             raise CliError(f"{part} refused the transition {args.transition!r} (from {client.get_state(part)})")
-        if not args.wait:
-            print(f"{part}: {args.transition} accepted" + (" (its mode manager may undo it)" if managed else ""))
-            return 0
-        seconds = client.wait_for_state(part, args.transition, client.sent)
-        reached = client.get_state(part)
-        print(f"{part}: {reached} {seconds:.2f} s after the request")
-        if managed:
-            final = client.state_after(part, SETTLE)
-            if final != reached:
-                raise CliError(f"{part}: then {final} again: its mode manager put it back")
-            print(f"{part}: still {final} {SETTLE:g} s later")
-        return 0
+        return _confirm_state(client, args, part, managed)
 
     return _translated(args, {"get": get, "set": put}[args.action])
+
+
+def _confirm_state(client: Any, args: argparse.Namespace, part: str, managed: bool) -> int:
+    """After an accepted transition: say so, or with ``--wait`` how long it took to be confirmed
+    (and, for a managed node, whether its manager left it there)."""
+    if not args.wait:
+        print(f"{part}: {args.transition} accepted" + (" (its mode manager may undo it)" if managed else ""))
+        return 0
+    seconds = client.wait_for_state(part, args.transition, client.sent)
+    reached = client.get_state(part)
+    print(f"{part}: {reached} {seconds:.2f} s after the request")
+    if managed:
+        final = client.state_after(part, SETTLE)
+        if final != reached:
+            raise CliError(f"{part}: then {final} again: its mode manager put it back")
+        print(f"{part}: still {final} {SETTLE:g} s later")
+    return 0

@@ -272,6 +272,26 @@ class ModeClient:
                 from None
         return bool(response.possible), list(response.lines)
 
+    def request_change(self, part: str, mode: str = "", transition: str = "", requester: str = "",
+                       priority: int = -1) -> tuple[bool, str]:
+        """Ask ``sm-bt manager`` for ``mode`` (or ``transition``) of ``part`` as ``requester`` at
+        ``priority`` (-1: the requester's) through sm_bt's own ``/{part}/request_change``: whether
+        it was accepted, and why not. The reference's manager has none: :class:`ManagerUnreachable`."""
+        from sm_bt_msgs.srv import RequestChange
+
+        try:
+            response = self._call(RequestChange, part, "request_change", RequestChange.Request(
+                mode=mode, transition=transition, requester=requester, priority=priority))
+        except ManagerUnreachable as error:
+            raise ManagerUnreachable(f"{error} (a requester or a priority needs sm-bt manager: the reference's "
+                                     "manager has neither)") from None
+        return bool(response.accepted), str(response.reason)
+
+    def offers(self, part: str, service: str) -> bool:
+        """Does the graph show ``/{part}/{service}`` now (``request_change``: an ``sm-bt manager``)?"""
+        name = f"/{part}/{service}"
+        return any(found == name for found, _ in self.node.get_service_names_and_types())
+
     def change_mode(self, part: str, mode: str) -> bool:
         """Ask for ``mode``; whether the manager accepted the request (not that it is done)."""
         from system_modes_msgs.srv import ChangeMode

@@ -48,7 +48,8 @@ GRAPH_SETTINGS = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_
                   "FASTDDS_DEFAULT_PROFILES_FILE", "FASTDDS_BUILTIN_TRANSPORTS", "CYCLONEDDS_URI")
 #: The ModeClient methods a command may call through the daemon.
 CALLS = frozenset({"get_mode", "available_modes", "check_mode", "change_mode", "wait_for_mode", "get_state",
-                   "change_state", "wait_for_state", "managed_node", "state_after", "preview_change"})
+                   "change_state", "wait_for_state", "managed_node", "state_after", "preview_change",
+                   "request_change", "offers"})
 #: The errors a call may raise, re-raised in the command as the same class.
 ERRORS: dict[str, type[Exception]] = {cls.__name__: cls for cls in (
     client_module.ManagerUnreachable, client_module.UnknownName, client_module.NotConfirmed)}
@@ -101,13 +102,13 @@ class DaemonClient:
     def __getattr__(self, name: str) -> Callable[..., Any]:
         if name not in CALLS:
             raise AttributeError(name)
-        return lambda *args: self._call(name, list(args))
+        return lambda *args, **kwargs: self._call(name, list(args), kwargs)
 
-    def _call(self, name: str, args: list[Any]) -> Any:
+    def _call(self, name: str, args: list[Any], kwargs: dict[str, Any]) -> Any:
         # A call ends within its own timeouts in the daemon; this bound only guards a daemon that hangs.
         self._connection.settimeout(3 * max(self.timeout, client_module.GRAPH_SETTLE, 5.0) + 5.0)
         try:
-            self._connection.sendall((json.dumps({"call": name, "args": args}) + "\n").encode())
+            self._connection.sendall((json.dumps({"call": name, "args": args, "kwargs": kwargs}) + "\n").encode())
             reply = json.loads(self._lines.readline() or "null")
         except (OSError, ValueError) as error:
             raise client_module.ManagerUnreachable(
@@ -264,7 +265,8 @@ class _Handler(socketserver.StreamRequestHandler):
                 try:
                     if name not in CALLS:
                         raise client_module.ManagerUnreachable(f"the client daemon has no call {name!r}")
-                    self._send({"value": getattr(mode_client, name)(*call.get("args", [])), "sent": mode_client.sent})
+                    value = getattr(mode_client, name)(*call.get("args", []), **call.get("kwargs", {}))
+                    self._send({"value": value, "sent": mode_client.sent})
                 except tuple(ERRORS.values()) as error:
                     self._send({"raise": type(error).__name__, "message": str(error), "sent": mode_client.sent})
         except (OSError, ValueError):

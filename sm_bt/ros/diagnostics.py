@@ -37,7 +37,8 @@ from sm_bt.engine.clock import Clock, TimerHandle
 from sm_bt.engine.events import Event, EventKind, Subscription
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
-from sm_bt.model.types import NodePart
+from sm_bt.model.hierarchy import parts_below
+from sm_bt.model.types import NodePart, SystemPart
 from sm_bt.ros import removable
 
 log = logging.getLogger("sm_bt.ros.diagnostics")
@@ -173,6 +174,11 @@ class DiagnosticsPublisher:
             self._note(event.request.part, event.request)
         elif event.kind in (EventKind.ACTUAL, EventKind.TARGET, EventKind.DIVERGENCE, EventKind.FAILED):
             self._changed(event.part)
+        elif event.kind is EventKind.HOLD:  # held_by changes on the part and every part below it
+            model = self._manager.model
+            children = {name: part.parts for name, part in model.parts.items() if isinstance(part, SystemPart)}
+            for name in (event.part, *parts_below(event.part, children)):
+                self._changed(name)
 
     def _note(self, part: str, request: Request) -> None:
         with self._lock:

@@ -7,6 +7,8 @@ For every part of the model, with the reference's names and types (a drop-in for
 * every part: ``/{part}/change_mode``, ``get_mode``, ``get_available_modes`` (system_modes_msgs);
 * every part, sm_bt's own: ``/{part}/preview_change`` (sm_bt_msgs/PreviewChange): what a change
   of mode or state would do, without doing it (``sm-bt mode set --dry-run``);
+  ``/{part}/request_change`` (sm_bt_msgs/RequestChange): a change with its requester and priority,
+  answered with the reason when refused (``sm-bt mode set --priority``);
 * topics ``/{part}/mode_request_info`` and ``/{part}/transition_request_info`` (when a part's
   target changes), ``/{system}/transition_event`` and ``/{part}/mode_event`` (when its inferred
   state or mode changes).
@@ -56,7 +58,7 @@ from lifecycle_msgs.msg import TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sm_bt_msgs.srv import PreviewChange
+from sm_bt_msgs.srv import PreviewChange, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 
@@ -145,6 +147,7 @@ class ModeManagerServer:
         service(GetMode, "get_mode", lambda req, res: self._get_mode(part, res))
         service(GetAvailableModes, "get_available_modes", lambda req, res: self._get_available_modes(part, res))
         service(PreviewChange, "preview_change", lambda req, res: self._preview_change(part, req, res))
+        service(RequestChange, "request_change", lambda req, res: self._request_change(part, req, res))
         self._mode_events[part] = publisher(ModeEvent, "mode_event")
         self._mode_requests[part] = publisher(ModeEvent, "mode_request_info")
         self._transition_requests[part] = publisher(TransitionEvent, "transition_request_info")
@@ -205,6 +208,25 @@ class ModeManagerServer:
         response.possible, response.refused, response.calls = preview.possible, preview.refused, preview.calls
         response.lines = preview.lines()
         response.json = json.dumps(preview.as_json())
+        return response
+
+    def _request_change(self, part: str, request: Any, response: Any) -> Any:
+        requester = request.requester or self.requester
+        priority = None if request.priority < 0 else int(request.priority)
+        log.debug("-> callback request_change of %s: %r %r [%s, %s]", part, request.mode, request.transition,
+                  requester, priority)
+        try:
+            handle = (self._manager.change_state(part, request.transition, requester=requester, priority=priority)
+                      if request.transition else
+                      self._manager.change_mode(part, request.mode or DEFAULT_MODE, requester=requester,
+                                                priority=priority))
+        except RequestError as error:  # a name the model does not have: nothing is touched
+            log.warning("request_change of %s refused: %s", part, error)
+            response.accepted, response.reason = False, str(error)
+            return response
+        self._told(part, handle)
+        response.accepted, response.request = not handle.refused, handle.id
+        response.reason = handle.reason if handle.refused else ""
         return response
 
     def _told(self, part: str, handle: Request) -> None:
@@ -301,6 +323,8 @@ def _failure_response(kind: Any) -> Callable[[Any], None]:
             response.success = False
         elif kind is PreviewChange:
             response.possible, response.refused = False, "the manager failed to preview it (its log says why)"
+        elif kind is RequestChange:
+            response.accepted, response.reason = False, "the manager failed to take it (its log says why)"
         elif kind is GetMode:
             response.current_mode = "unknown"
         elif kind is GetState:

@@ -46,7 +46,7 @@ Behaviour = py_trees.behaviour.Behaviour
 _COLOURS = {"sequence": "#FFA500", "selector": "#00FFFF", "parallel": "#FFFF00", "chooser": "#808080",
             "decorator": "#DDDDDD", "behaviour": "#555555"}
 #: Manager events that go into frames; the rest (actual, target) only mark the table as due.
-_LISTED = frozenset({EventKind.DIVERGENCE, EventKind.REQUEST, EventKind.RULE, EventKind.FAILED})
+_LISTED = frozenset({EventKind.DIVERGENCE, EventKind.REQUEST, EventKind.RULE, EventKind.FAILED, EventKind.HOLD})
 #: Lines of a request's plan a frame carries (the rest is summed up).
 PLAN_LINES = 40
 #: Ticks between looks at the whole tree (its shape, every behaviour, the mode table).

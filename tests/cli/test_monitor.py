@@ -162,11 +162,11 @@ def test_json_snapshot_shape_and_round_trip() -> None:
     parts = {entry["part"]: entry for entry in data["parts"]}
     assert [entry["part"] for entry in data["parts"]][:2] == ["pilot", "amcl"]
     assert set(parts["amcl"]) == {"part", "kind", "target_state", "target_mode", "actual_state", "actual_mode",
-                                  "state_inferred", "mode_inferred", "divergence"}
+                                  "state_inferred", "mode_inferred", "divergence", "held_by"}
     assert parts["amcl"] == {
         "part": "amcl", "kind": "node", "target_state": "active", "target_mode": "__DEFAULT__",
         "actual_state": "active", "actual_mode": "__DEFAULT__", "state_inferred": False, "mode_inferred": True,
-        "divergence": None,
+        "divergence": None, "held_by": None,
     }
     laser = parts["laser_resender"]
     assert (laser["actual_state"], laser["actual_mode"], laser["mode_inferred"]) == ("inactive", None, False)
@@ -378,3 +378,17 @@ def test_a_terminal_gets_colour_unless_no_color_is_set(monkeypatch: pytest.Monke
     monkeypatch.setenv("NO_COLOR", "1")
     coloured = _printed(_Terminal())
     assert "31m" not in coloured and "33m" not in coloured  # no red, no yellow (bold may stay)
+
+
+def test_who_holds_which_parts_is_under_the_table() -> None:
+    from sm_bt.sim import SimulatedSystem
+
+    system = SimulatedSystem(bundled("pilot"))
+    hold = system.manager.hold("pilot", "f_degraded_mode", requester="metacontroller")
+    system.finish(hold.request)
+    text = render_text(snapshot(system.manager))
+    assert text.splitlines()[-1] == (" held by metacontroller (priority 60): pilot, amcl, controller_server, "
+                                     "laser_resender, pointcloud_to_laser")
+    assert to_json(snapshot(system.manager), 0.0)["parts"][0]["held_by"] == "metacontroller (priority 60)"
+    hold.release()
+    assert "held by" not in render_text(snapshot(system.manager))

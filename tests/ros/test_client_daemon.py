@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from ros_processes import ManagerProcess, Starter, wait_until
+from ros_processes import ManagerProcess, Starter, line_within, wait_until
 
 from sm_bt.cli import main
 from sm_bt.ros import client_daemon
@@ -71,9 +71,9 @@ def run_daemon(pids: list[int], *args: str) -> subprocess.Popen[str]:
     process = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "daemon", "run", *args], text=True,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     pids.append(process.pid)
-    assert process.stdout is not None
-    line = process.stdout.readline()
-    assert line.startswith("READY "), (line, process.stderr.read() if process.poll() is not None else "")
+    line = line_within(process.stdout, 30.0, "sm-bt daemon run: READY")
+    assert line.startswith("READY "), (line, process.stderr.read() if process.poll() is not None and process.stderr
+                                       else "")
     return process
 
 
@@ -114,7 +114,12 @@ def test_commands_run_in_the_daemon_with_the_same_answers_and_exit_codes(
     code, _, err = sm_bt(capsys, "state", "set", "amcl", "deactivate")
     assert code == 1 and err.startswith("sm-bt: error: amcl is a node that a mode manager manages"), err
     assert sm_bt(capsys, "mode", "get", "pilot") == (0, "pilot: f_normal_mode\n", "")
-    assert served(capsys) == before + 5  # each command once, none in a process of its own
+    # Calls with keyword arguments cross too (a dry run; a request with a priority).
+    code, out, _ = sm_bt(capsys, "mode", "set", "pilot", "f_degraded_mode", "--dry-run")
+    assert code == 0 and out.startswith("change_mode pilot f_degraded_mode: "), out
+    assert sm_bt(capsys, "mode", "set", "pilot", "f_slow_mode", "--priority", "60") == (
+        0, "pilot: change to f_slow_mode accepted\n", "")
+    assert served(capsys) == before + 7  # each command once, none in a process of its own
 
     assert sm_bt(capsys, "daemon", "stop")[0] == 0
     assert daemon.wait(timeout=5.0) == 0

@@ -8,6 +8,7 @@ rclpy clients play the part of existing system_modes users.
 from __future__ import annotations
 
 import gc
+import re
 import signal
 import subprocess
 import sys
@@ -27,9 +28,11 @@ from model_files import bundled
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_harness import BACKEND_OPTIONS, RosHarness
 from ros_processes import NodeProcess, RosContext, Starter, call, wait_until
+from sm_bt_msgs.srv import RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 
+from sm_bt.cli import main
 from sm_bt.engine.backend import CallResult, NodeReport
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State, StateMode
@@ -333,7 +336,7 @@ def test_the_runtime_reports_a_node_appearing_late(node_processes: Starter) -> N
 
 
 def test_requests_through_the_interface_come_from_the_operator_and_respect_holds(
-        pilot: RosHarness, ros_context: RosContext) -> None:
+        pilot: RosHarness, ros_context: RosContext, capsys: pytest.CaptureFixture[str]) -> None:
     """A rule's hold (priority 100) refuses an operator's change_mode (80) over ROS; a tree's
     hold (40) gives way to it, as the last request always did."""
     manager = pilot.manager
@@ -342,7 +345,20 @@ def test_requests_through_the_interface_come_from_the_operator_and_respect_holds
     settle(pilot, rule.request)
     refused = ros_context.call(ChangeMode, "/pilot/change_mode", ChangeMode.Request(mode_name="f_normal_mode"))
     assert not refused.success and str(manager.actual("pilot")) == "active.f_degraded_mode"
-    rule.release()
+    # sm_bt's own service says who asks, at which priority, and why it is refused.
+    metacontroller = ros_context.call(RequestChange, "/pilot/request_change", RequestChange.Request(
+        mode="f_normal_mode", requester="metacontroller", priority=-1))
+    assert not metacontroller.accepted
+    assert re.fullmatch(r"pilot is held in active\.f_degraded_mode by rule \(priority 100\) since \d+\.\d s",
+                        metacontroller.reason), metacontroller.reason
+    code = main(["mode", "set", "pilot", "f_slow_mode", "--timeout", "5"])  # the operator's shell
+    err = capsys.readouterr().err
+    assert code == 1 and err.startswith("sm-bt: error: the manager refused mode 'f_slow_mode' for pilot: pilot is "
+                                        "held in active.f_degraded_mode by rule (priority 100)"), err
+    code = main(["mode", "set", "pilot", "f_slow_mode", "--priority", "100", "--wait", "--timeout", "10"])
+    assert code == 0 and not rule.active, capsys.readouterr()
+    assert rule.reason.startswith("superseded by request #") and rule.reason.endswith("of operator")
+    assert str(manager.actual("pilot")) == "active.f_slow_mode"
     tree = manager.hold("pilot", "f_slow_mode", requester="tree")
     settle(pilot, tree.request)
     accepted = ros_context.call(ChangeMode, "/pilot/change_mode", ChangeMode.Request(mode_name="f_normal_mode"))

@@ -166,3 +166,14 @@ def test_a_recording_that_cannot_be_read_says_why(tmp_path: Path, lines: list[An
     path.write_text("".join(json.dumps(line) + "\n" for line in lines))
     with pytest.raises(ValueError, match=error.replace("(", r"\(").replace(")", r"\)")):
         read_recording(path)
+
+
+def test_holds_begin_and_end_in_the_frames_events() -> None:
+    demo = _demo(cycles=1, rules=True)
+    frames = _checking(demo, lambda frame, folded: None)
+    holds = [event["text"] for frame in frames for event in frame.get("events", []) if event["kind"] == "hold"]
+    assert holds == [
+        "pilot held in active.f_degraded_mode by rule degrade_from_normal (priority 100), while laser_resender is "
+        "unconfigured",
+        holds[1]]
+    assert holds[1].startswith("pilot no longer held by rule degrade_from_normal: superseded by request #")
