@@ -23,14 +23,43 @@ from sm_bt.model.types import Model
 TRANSITIONS = REQUESTABLE_LABELS
 
 
+def _priority(name: str, priority: int | str | None) -> int | None:
+    """A priority as a whole number of 0 or more (an XML attribute is text); ``ValueError`` naming
+    the behaviour otherwise."""
+    if priority is None:
+        return None
+    try:
+        value = int(priority)
+    except (TypeError, ValueError):
+        value = -1
+    if value < 0:
+        raise ValueError(f"{name}: priority must be a whole number, 0 or more, not {priority!r}")
+    return value
+
+
+def _flag(name: str, what: str, value: bool | str) -> bool:
+    """A yes/no option (an XML attribute is text: "true" or "false")."""
+    if isinstance(value, bool):
+        return value
+    if value.lower() in ("true", "false"):
+        return value.lower() == "true"
+    raise ValueError(f"{name}: {what} must be true or false, not {value!r}")
+
+
 class _RequestBehaviour(ManagerBehaviour, register=False):
     """Common life of a behaviour that owns one manager request."""
 
     def __init__(self, name: str, part: str, timeout: float | None, *, manager: ModeManager | None = None,
-                 on_failure: str | None = None, **kwargs: Any) -> None:
+                 on_failure: str | None = None, priority: int | str | None = None, queue: bool | str = False,
+                 **kwargs: Any) -> None:
         super().__init__(name, manager=manager, **kwargs)
         self.part = part
         self.timeout = seconds(name, timeout)
+        #: The request's priority against the manager's holds (``None``: the tree's, 40).
+        self.priority = _priority(name, priority)
+        #: Held back by a hold, the request waits for it to end (RUNNING, "queued: ...") rather
+        #: than failing at once; its timeout still bounds it.
+        self.queue = _flag(name, "queue", queue)
         try:
             #: What the request leaves behind if it fails: "stay", "rollback", "mode:<name>"
             #: (``None``: the manager's default).
@@ -92,13 +121,17 @@ class ChangeMode(_RequestBehaviour):
 
     ``timeout`` (seconds of the manager's clock) bounds the whole change; ``None`` takes the
     manager's ``request_timeout``. ``on_failure``: what a failed change leaves behind ("stay",
-    "rollback", "mode:<name>"; ``None``: the manager's default). An unknown part or mode is an
-    error at ``setup``.
+    "rollback", "mode:<name>"; ``None``: the manager's default). ``priority``: the request's
+    against the manager's holds (``None``: the tree's; a part held at a higher one refuses it:
+    FAILURE naming the holder, or with ``queue`` RUNNING until the hold ends, within
+    ``timeout``). An unknown part or mode is an error at ``setup``.
     """
 
     def __init__(self, name: str, part: str, mode: str, timeout: float | None = None, *,
-                 manager: ModeManager | None = None, on_failure: str | None = None, **kwargs: Any) -> None:
-        super().__init__(name, part, timeout, manager=manager, on_failure=on_failure, **kwargs)
+                 manager: ModeManager | None = None, on_failure: str | None = None, priority: int | str | None = None,
+                 queue: bool | str = False, **kwargs: Any) -> None:
+        super().__init__(name, part, timeout, manager=manager, on_failure=on_failure, priority=priority,
+                         queue=queue, **kwargs)
         require_mode_name(name, part, mode)
         self.mode = mode
 
@@ -112,7 +145,7 @@ class ChangeMode(_RequestBehaviour):
 
     def _make_request(self, manager: ModeManager) -> Request:
         request = manager.change_mode(self.part, self.mode, timeout=self.timeout, requester=REQUESTER,
-                                      on_failure=self.on_failure)
+                                      on_failure=self.on_failure, priority=self.priority, queue=self.queue)
         self.plan = manager.plan_of(request)
         return request
 
@@ -162,8 +195,10 @@ class ChangeState(_RequestBehaviour):
     """
 
     def __init__(self, name: str, part: str, transition: str | Transition, timeout: float | None = None, *,
-                 manager: ModeManager | None = None, on_failure: str | None = None, **kwargs: Any) -> None:
-        super().__init__(name, part, timeout, manager=manager, on_failure=on_failure, **kwargs)
+                 manager: ModeManager | None = None, on_failure: str | None = None, priority: int | str | None = None,
+                 queue: bool | str = False, **kwargs: Any) -> None:
+        super().__init__(name, part, timeout, manager=manager, on_failure=on_failure, priority=priority,
+                         queue=queue, **kwargs)
         label = transition.label if isinstance(transition, Transition) else transition
         if label not in TRANSITIONS:
             raise ValueError(f"{name}: cannot request transition {label!r} (one of: {', '.join(TRANSITIONS)})")
@@ -179,7 +214,7 @@ class ChangeState(_RequestBehaviour):
 
     def _make_request(self, manager: ModeManager) -> Request:
         return manager.change_state(self.part, self.transition, timeout=self.timeout, requester=REQUESTER,
-                                    on_failure=self.on_failure)
+                                    on_failure=self.on_failure, priority=self.priority, queue=self.queue)
 
 
 __all__ = ["TRANSITIONS", "CanChangeMode", "ChangeMode", "ChangeState"]

@@ -31,6 +31,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speed", type=non_negative, default=35.0,
                         help="world (virtual) seconds per wall second; 0 runs as fast as possible, "
                              "simulated only (default 35)")
+    parser.add_argument("--rules", action="store_true",
+                        help="the model with the laser rule (pilot_rules): the manager itself switches to "
+                             "degraded mode when the laser fails, and holds it there against lower-priority "
+                             "requests until the tree sees the scans healthy again")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
     add_view_arguments(parser)
     parser.add_argument("--ros", action="store_true",
@@ -60,7 +64,8 @@ def _time(text: str) -> float | None:
 def run(args: argparse.Namespace) -> int:
     options = Options(laser_failure_at=args.laser_failure_at, laser_repair_at=args.laser_repair_at,
                       cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree, ros=args.ros,
-                      view=args.view, view_host=args.host, record=args.record, linger=args.view is not None)
+                      rules=args.rules, view=args.view, view_host=args.host, record=args.record,
+                      linger=args.view is not None)
     if not options.ros:
         try:
             return Demo(options).run()

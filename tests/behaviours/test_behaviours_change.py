@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import py_trees
 import pytest
@@ -323,3 +324,38 @@ def test_can_change_mode_says_whether_a_change_could_be_made_now_without_asking_
     assert can.status is Status.FAILURE
     assert can.feedback_message == ("cannot be made now: laser_resender is not reachable (no answer for 1.0 s "
                                     "(crashed?))")
+
+
+# -- priority and queue against the manager's holds --------------------------------------------------
+
+
+def test_a_change_at_a_priority_overrides_a_lower_hold_and_one_queued_waits_for_a_higher_one(
+        tmp_path: Path) -> None:
+    from sm_bt.trees.mission_xml import load_tree
+
+    rig = pilot_rig()
+    rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+    hold = rig.manager.hold("pilot", "f_degraded_mode", requester="operator", lease=4.0)
+    rig.finish(hold.request)
+    # The tree's own priority (40) is refused at once, naming the holder.
+    refused = ChangeMode("Slow", "pilot", "f_slow_mode")
+    trace = rig.tick_until_done(rig.tree(refused))
+    assert trace[-1].status is Status.FAILURE and "held in active.f_degraded_mode by operator" in trace[-1].feedback
+    # Queued, it is RUNNING while held (saying so), and goes ahead once the lease runs out.
+    queued = ChangeMode("Slow", "pilot", "f_slow_mode", timeout=10.0, queue=True)
+    tree = rig.tree(queued)
+    tree.tick()
+    assert queued.status is Status.RUNNING and queued.feedback_message.startswith("queued: pilot is held in ")
+    trace = rig.tick_until_done(tree, timeout=10.0)
+    assert trace[-1].status is Status.SUCCESS and not hold.active
+    # From XML: the attributes are text.
+    file = tmp_path / "mission.xml"
+    file.write_text('<root><BehaviorTree ID="M"><ChangeMode part="pilot" mode="f_normal_mode" priority="90" '
+                    'queue="false"/></BehaviorTree></root>')
+    rig.finish(rig.manager.hold("pilot", "f_slow_mode", requester="operator").request)
+    trace = rig.tick_until_done(rig.tree(load_tree(file, model=rig.manager.model)))
+    assert trace[-1].status is Status.SUCCESS and str(rig.manager.actual("pilot")) == "active.f_normal_mode"
+    with pytest.raises(ValueError, match="priority must be a whole number, 0 or more, not 'high'"):
+        ChangeMode("Bad", "pilot", "f_normal_mode", priority="high")
+    with pytest.raises(ValueError, match="queue must be true or false, not 'maybe'"):
+        ChangeMode("Bad", "pilot", "f_normal_mode", queue="maybe")

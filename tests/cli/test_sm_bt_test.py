@@ -61,11 +61,11 @@ def test_a_scenario_that_cannot_run_says_why(capsys: pytest.CaptureFixture[str],
 
 def test_the_pilots_stories_ship_as_scenarios_and_pass(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     shipped = sorted((ROOT / "trees" / "pilot" / "scenarios").glob("*.yaml"))
-    assert [path.name for path in shipped] == ["battery.yaml", "laser_failure.yaml"]
+    assert [path.name for path in shipped] == ["battery.yaml", "laser_failure.yaml", "laser_rule.yaml"]
     code = main(["test", *map(str, shipped), "--runs", str(tmp_path / "runs")])
     out, _ = capsys.readouterr()
     assert code == 0, out
-    assert [line.split(":")[0] for line in out.splitlines()[:2]] == [f"PASSED {path}" for path in shipped]
+    assert [line.split(":")[0] for line in out.splitlines()[:3]] == [f"PASSED {path}" for path in shipped]
     # The world's laser matters: never repaired, the pilot stays degraded and the expectation says so.
     never_repaired = tmp_path / "laser_failure.yaml"
     never_repaired.write_text(shipped[1].read_text().replace("tree: ../pilot.xml", f"tree: {shipped[1].parent.parent}"
@@ -75,3 +75,12 @@ def test_the_pilots_stories_ship_as_scenarios_and_pass(capsys: pytest.CaptureFix
     out, _ = capsys.readouterr()
     assert code == 1
     assert f"  {never_repaired}:13: at 45 s pilot is active.f_degraded_mode, expected active.f_normal_mode" in out, out
+    # The rule's hold matters: the tree asking for normal mode at its own priority stays degraded.
+    own_priority = tmp_path / "laser_rule.yaml"
+    own_priority.write_text(shipped[2].read_text().replace("tree: ../pilot.xml", f"tree: {tmp_path}/pilot.xml"))
+    (tmp_path / "pilot.xml").write_text((shipped[2].parent.parent / "pilot.xml").read_text().replace(
+        ' priority="100"', ""))
+    code = main(["test", str(own_priority), "--runs", str(tmp_path / "runs")])
+    out, _ = capsys.readouterr()
+    assert code == 1
+    assert f"  {own_priority}:16: at 45 s pilot is active.f_degraded_mode, expected active.f_normal_mode" in out, out

@@ -38,6 +38,25 @@ def test_demo_tells_the_whole_story(tree: str) -> None:
     assert_in_order(text, ["robot at wp_7", "patrol round 2 of 2 complete", "mission SUCCESS"])
 
 
+def test_with_the_laser_rule_the_manager_degrades_and_holds_until_the_tree_sees_the_laser_back() -> None:
+    code, text, demo = run_demo(rules=True)
+    assert code == 0, text
+    assert_in_order(text, [
+        "laser failure",
+        "!! rule degrade_from_normal: laser_resender is unconfigured -> active.f_degraded_mode",
+        "## pilot held in active.f_degraded_mode by rule degrade_from_normal (priority 100), while laser_resender "
+        "is unconfigured",
+        "== pilot is now active.f_degraded_mode ==",
+        "held by rule degrade_from_normal (priority 100): pilot, amcl",  # under the monitor's table
+        "laser repaired: scans healthy again",
+        "## pilot no longer held by rule degrade_from_normal: superseded by request",
+        "== pilot is now active.f_normal_mode ==",
+        "mission SUCCESS"])
+    # The rule switched, not the tree: the tree's own switch found the pilot degraded already.
+    assert [r.requester for r in demo.tally.requests if str(r.target) == "active.f_degraded_mode"] == [
+        "rule degrade_from_normal"]
+
+
 Line = tuple[float, str]
 
 

@@ -28,6 +28,7 @@ from sm_bt.behaviours import (
     hold_mode,
     switch_on_divergence,
 )
+from sm_bt.engine.holds import PRIORITIES
 from sm_bt.trees.pilot.actions import (
     BATTERY_LEVEL,
     LASER_SCANS_OK,
@@ -111,11 +112,13 @@ def patrol(cycles: int, recharging: Behaviour | None = None) -> Behaviour:
 
 
 def contingencies() -> Behaviour:
-    """Always RUNNING: watches for the laser contingencies and switches mode."""
+    """Always RUNNING: watches for the laser contingencies and switches mode. Back to normal mode
+    at the rules' priority: the tree sees the scans healthy again, which ends a laser rule's hold
+    of degraded mode (``pilot_rules``; nothing else tells the manager that the laser works)."""
     laser_back = py_trees.composites.Sequence("Laser back", memory=True, children=[
         ModeIs("Degraded?", SYSTEM, DEGRADED),
         is_true("Scans healthy?", LASER_SCANS_OK, True),
-        ChangeMode(f"{NORMAL} again", SYSTEM, NORMAL),
+        ChangeMode(f"{NORMAL} again", SYSTEM, NORMAL, priority=PRIORITIES["rule"]),
     ])
     return py_trees.composites.Selector("Contingencies", memory=False, children=[
         switch_on_divergence("Laser lost", "laser_resender", SYSTEM, DEGRADED),

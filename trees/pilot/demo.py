@@ -91,6 +91,7 @@ class Options:
     tick: float = 0.1  # virtual seconds between ticks (simulated platform)
     limit: float = 1500.0  # world seconds before giving up
     ros: bool = False  # real rclpy lifecycle nodes in a child process instead of simulated ones
+    rules: bool = False  # the model with the laser rule (pilot_rules): the manager degrades, and holds it
     view: int | None = None  # serve the web view on this port (0: any free port)
     view_host: str = "127.0.0.1"
     record: str | None = None  # write the view's frames to this .jsonl file
@@ -117,7 +118,7 @@ class Demo:
             raise ValueError("--speed must be more than 0 with --ros (world seconds per wall second)")
         self.options = options
         self.console = console or terminal_console()
-        self.model = load_model(bundled_model("pilot"))
+        self.model = load_model(bundled_model("pilot_rules" if options.rules else "pilot"))
         # On ROS the world runs --speed times faster than the manager's wall clock; on the
         # simulated platform both run on the virtual clock, and --speed only paces it.
         self.world = World(time_scale=options.speed if options.ros else 1.0)
@@ -239,6 +240,8 @@ class Demo:
             self.say(f"!! {event.message}", "bold red")
         elif event.kind is EventKind.RULE:
             self.say(f"!! {event.message}", "magenta")
+        elif event.kind is EventKind.HOLD:
+            self.say(f"## {event.message}", "magenta")
         elif event.kind is EventKind.DIVERGENCE and isinstance(self.model.parts.get(event.part), NodePart):
             divergence = event.divergence
             if divergence is None:
