@@ -7,6 +7,7 @@ extra::
     sm-bt mode get pilot                         # pilot: f_normal_mode
     sm-bt mode list pilot                        # the modes the manager offers
     sm-bt mode set pilot f_degraded_mode --wait  # waits for the manager to confirm it
+    sm-bt mode hold pilot f_degraded_mode        # holds it until Ctrl-C (sm-bt manager only)
     sm-bt state get pilot
     sm-bt state set pilot configure --wait
 
@@ -18,14 +19,17 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import time
 from contextlib import AbstractContextManager
 from typing import Any
 
-from sm_bt.cli.arguments import non_negative
+from sm_bt.cli.arguments import non_negative, positive
 from sm_bt.cli.common import CliError, UsageError
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
 
 DEFAULT_TIMEOUT = 10.0
+#: `sm-bt mode hold`'s lease: how long a hold outlives a command that died (renewed every third).
+HOLD_LEASE = 5.0
 #: Seconds a forced node transition must hold before --wait calls it final: longer than a mode
 #: manager's grace period (2 s by default) and its restore.
 SETTLE = 5.0
@@ -56,7 +60,18 @@ def add_mode_arguments(parser: argparse.ArgumentParser) -> None:
                      help="ask sm-bt manager what the change would do, and do nothing: the plan (stages, calls, "
                           "parameters), or why it would be refused (exit 1)")
     _who(put)
-    for child in (get, listed):
+    hold = actions.add_parser("hold", help="hold the part in MODE while this command runs: requests of a lower "
+                                           "priority that would change it are refused, naming the holder; Ctrl-C "
+                                           "(or --for) releases it, and if the command dies the lease runs out")
+    hold.add_argument("part", metavar="PART", help=PART_HELP)
+    hold.add_argument("mode", metavar="MODE", help="one of the part's modes, or __DEFAULT__")
+    hold.add_argument("--lease", type=positive, default=HOLD_LEASE, metavar="SECONDS",
+                      help=f"how long the hold outlives this command's last renewal (default {HOLD_LEASE:g}; "
+                           "renewed every third of it)")
+    hold.add_argument("--for", dest="hold_for", type=positive, metavar="SECONDS",
+                      help="release it after this long (default: at Ctrl-C)")
+    _who(hold)
+    for child in (get, listed, hold):
         _common(child)
     _common(put, waits=True)
     parser.epilog = ("Needs a mode manager on ROS 2 (`sm-bt manager MODEL`, or the reference's) in this shell's "
@@ -172,7 +187,29 @@ def run_mode(args: argparse.Namespace) -> int:
         print(f"{part}: {args.mode} confirmed {seconds:.2f} s after the request")
         return 0
 
-    return _translated(args, {"get": get, "list": listed, "set": put}[args.action])
+    def held(client: Any) -> int:
+        client.check_mode(part, args.mode)
+        accepted, reason, number = client.hold_mode(part, args.mode, args.requester or "",
+                                                    -1 if args.priority is None else args.priority, args.lease)
+        if not accepted:
+            raise CliError(f"the manager refused to hold {part} in {args.mode}: {reason}")
+        print(f"{part}: held in {args.mode} (hold #{number}, lease {args.lease:g} s); "
+              + ("Ctrl-C releases it" if args.hold_for is None else f"released in {args.hold_for:g} s or at Ctrl-C"),
+              flush=True)
+        ends = None if args.hold_for is None else time.monotonic() + args.hold_for
+        try:
+            while ends is None or time.monotonic() < ends:
+                time.sleep(args.lease / 3 if ends is None else max(0.0, min(args.lease / 3, ends - time.monotonic())))
+                accepted, reason, _ = client.hold_mode(part, hold=number)
+                if not accepted:
+                    raise CliError(f"{part}: no longer held: {reason}")
+        except KeyboardInterrupt:
+            pass
+        client.hold_mode(part, hold=number, release=True)
+        print(f"{part}: released", flush=True)
+        return 0
+
+    return _translated(args, {"get": get, "list": listed, "set": put, "hold": held}[args.action])
 
 
 def run_state(args: argparse.Namespace) -> int:

@@ -287,6 +287,20 @@ class ModeClient:
                                      "manager has neither)") from None
         return bool(response.accepted), str(response.reason)
 
+    def hold_mode(self, part: str, mode: str = "", requester: str = "", priority: int = -1, lease: float = 0.0,
+                  hold: int = 0, release: bool = False) -> tuple[bool, str, int]:
+        """Hold ``part`` in ``mode`` through ``sm-bt manager``'s ``/{part}/hold_mode``, or renew
+        (``hold``: its number) or release it: (accepted, why not, the hold's number)."""
+        from sm_bt_msgs.srv import HoldMode
+
+        try:
+            response = self._call(HoldMode, part, "hold_mode", HoldMode.Request(
+                mode=mode, requester=requester, priority=priority, lease=lease, hold=hold, release=release))
+        except ManagerUnreachable as error:
+            raise ManagerUnreachable(f"{error} (a hold needs sm-bt manager: the reference's manager has none)") \
+                from None
+        return bool(response.accepted), str(response.reason), int(response.hold)
+
     def offers(self, part: str, service: str) -> bool:
         """Does the graph show ``/{part}/{service}`` now (``request_change``: an ``sm-bt manager``)?"""
         name = f"/{part}/{service}"

@@ -8,7 +8,8 @@ For every part of the model, with the reference's names and types (a drop-in for
 * every part, sm_bt's own: ``/{part}/preview_change`` (sm_bt_msgs/PreviewChange): what a change
   of mode or state would do, without doing it (``sm-bt mode set --dry-run``);
   ``/{part}/request_change`` (sm_bt_msgs/RequestChange): a change with its requester and priority,
-  answered with the reason when refused (``sm-bt mode set --priority``);
+  answered with the reason when refused (``sm-bt mode set --priority``); ``/{part}/hold_mode``
+  (sm_bt_msgs/HoldMode): a hold with a lease, renewed and released by its number (``sm-bt mode hold``);
 * topics ``/{part}/mode_request_info`` and ``/{part}/transition_request_info`` (when a part's
   target changes), ``/{system}/transition_event`` and ``/{part}/mode_event`` (when its inferred
   state or mode changes).
@@ -49,6 +50,7 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -58,11 +60,12 @@ from lifecycle_msgs.msg import TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sm_bt_msgs.srv import PreviewChange, RequestChange
+from sm_bt_msgs.srv import HoldMode, PreviewChange, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 
 from sm_bt.engine.events import Event, EventKind, Subscription
+from sm_bt.engine.holds import Hold
 from sm_bt.engine.inference import Actual
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.manager import ModeManager
@@ -105,6 +108,8 @@ class ModeManagerServer:
         self._transition_events: dict[str, Any] = {}
         self._mode_requests: dict[str, Any] = {}
         self._transition_requests: dict[str, Any] = {}
+        self._holds: dict[int, Hold] = {}  # made through hold_mode, by number (ended ones dropped on the next call)
+        self._holds_lock = threading.Lock()
         self._clock: Any = node.get_clock()  # a ROSClock
         # The last published values, so each event carries its real start (and none repeats).
         self._modes: dict[str, str] = {}
@@ -148,6 +153,7 @@ class ModeManagerServer:
         service(GetAvailableModes, "get_available_modes", lambda req, res: self._get_available_modes(part, res))
         service(PreviewChange, "preview_change", lambda req, res: self._preview_change(part, req, res))
         service(RequestChange, "request_change", lambda req, res: self._request_change(part, req, res))
+        service(HoldMode, "hold_mode", lambda req, res: self._hold_mode(part, req, res))
         self._mode_events[part] = publisher(ModeEvent, "mode_event")
         self._mode_requests[part] = publisher(ModeEvent, "mode_request_info")
         self._transition_requests[part] = publisher(TransitionEvent, "transition_request_info")
@@ -227,6 +233,44 @@ class ModeManagerServer:
         self._told(part, handle)
         response.accepted, response.request = not handle.refused, handle.id
         response.reason = handle.reason if handle.refused else ""
+        return response
+
+    def _hold_mode(self, part: str, request: Any, response: Any) -> Any:
+        log.debug("-> callback hold_mode of %s: %r [%s, %s] lease %g, hold %d%s", part, request.mode,
+                  request.requester, request.priority, request.lease, request.hold,
+                  " release" if request.release else "")
+        with self._holds_lock:
+            return self._hold_locked(part, request, response)
+
+    def _hold_locked(self, part: str, request: Any, response: Any) -> Any:
+        if request.hold:  # a renewal or a release of a hold made here
+            held = self._holds.get(int(request.hold))
+            if held is None or held.part != part:
+                response.accepted, response.reason = False, f"no hold #{request.hold} of {part} was made here"
+                return response
+            if request.release:
+                held.release()
+            elif held.active:
+                held.renew()
+            response.accepted, response.hold = held.active or bool(request.release), held.id
+            response.reason = "" if held.active or request.release else f"hold #{held.id} ended: {held.reason}"
+            if not held.active:
+                self._holds.pop(held.id, None)
+            return response
+        try:
+            made = self._manager.hold(part, request.mode or DEFAULT_MODE, requester=request.requester or self.requester,
+                                      priority=None if request.priority < 0 else int(request.priority),
+                                      lease=float(request.lease) if request.lease > 0 else None)
+        except RequestError as error:
+            response.accepted, response.reason = False, str(error)
+            return response
+        if made.request is not None:
+            self._told(part, made.request)
+        response.accepted, response.reason, response.hold = made.active, made.reason, made.id
+        for number in [n for n, h in self._holds.items() if not h.active]:
+            del self._holds[number]
+        if made.active:
+            self._holds[made.id] = made
         return response
 
     def _told(self, part: str, handle: Request) -> None:
@@ -323,7 +367,7 @@ def _failure_response(kind: Any) -> Callable[[Any], None]:
             response.success = False
         elif kind is PreviewChange:
             response.possible, response.refused = False, "the manager failed to preview it (its log says why)"
-        elif kind is RequestChange:
+        elif kind is HoldMode or kind is RequestChange:
             response.accepted, response.reason = False, "the manager failed to take it (its log says why)"
         elif kind is GetMode:
             response.current_mode = "unknown"

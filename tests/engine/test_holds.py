@@ -355,3 +355,28 @@ def test_queued_requests_go_in_the_order_they_came_and_the_last_one_wins() -> No
     system.run(5.0)
     assert first.done and not first.succeeded and first.reason.startswith(f"preempted by request #{second.id}")
     assert second.succeeded and str(system.manager.actual("pilot")) == "active.f_performance_mode"
+
+
+def test_holds_that_agree_share_their_parts_until_the_last_one_lets_go() -> None:
+    """An operator holds navigation in f_energy_saving_mode, a metacontroller holds planning (a part
+    of it) in SLOW, which that mode needs too: both stand. The tree is refused while either holds,
+    naming each; a need that conflicts loses to the higher priority, told which part and holder."""
+    from model_files import fixture
+
+    system = SimulatedSystem(fixture("nav2_like"), rules=False, recovery=False)
+    operator = system.manager.hold("navigation", "f_energy_saving_mode", requester="operator")
+    system.finish(operator.request)
+    metacontroller = system.manager.hold("planning", "SLOW", requester="metacontroller")
+    assert operator.active and metacontroller.active
+    conflicting = system.manager.hold("planning", "FAST", requester="metacontroller")
+    assert not conflicting.active and conflicting.reason.startswith(
+        "planning (a part of navigation) is held in active.SLOW by operator (priority 80)")
+    refused = system.manager.change_mode("planning", "NORMAL", requester="tree")
+    assert "by operator (priority 80)" in refused.reason and "by metacontroller (priority 60)" in refused.reason
+    operator.release()  # the metacontroller still needs planning SLOW
+    refused = system.manager.change_mode("planning", "NORMAL", requester="tree")
+    assert refused.refused and "by operator" not in refused.reason and "by metacontroller" in refused.reason
+    assert system.manager.status("controller_server").held_by == "metacontroller (priority 60)"
+    metacontroller.release()  # the last one lets go: nothing is held, nothing changed by the release
+    assert system.manager.holds() == [] and str(system.manager.actual("planning")) == "active.SLOW"
+    assert system.finish(system.manager.change_mode("planning", "NORMAL", requester="tree")).succeeded

@@ -28,7 +28,7 @@ from model_files import bundled
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_harness import BACKEND_OPTIONS, RosHarness
 from ros_processes import NodeProcess, RosContext, Starter, call, wait_until
-from sm_bt_msgs.srv import RequestChange
+from sm_bt_msgs.srv import HoldMode, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
 
@@ -364,3 +364,35 @@ def test_requests_through_the_interface_come_from_the_operator_and_respect_holds
     accepted = ros_context.call(ChangeMode, "/pilot/change_mode", ChangeMode.Request(mode_name="f_normal_mode"))
     assert accepted.success and not tree.active
     assert tree.reason.startswith("superseded by request #") and tree.reason.endswith("of operator")
+
+
+def test_a_hold_over_ros_keeps_its_part_while_renewed_and_ends_with_its_lease_or_a_release(
+        pilot: RosHarness, ros_context: RosContext, capsys: pytest.CaptureFixture[str]) -> None:
+    """/pilot/hold_mode: a metacontroller's hold refuses the tree's lower request, lasts while
+    renewed, ends when its lease runs out unrenewed (a client that died) or when released;
+    `sm-bt mode hold` holds while it runs and releases at its end."""
+    manager = pilot.manager
+    settle(pilot, manager.change_mode("pilot", "f_normal_mode", requester="tree"))
+
+    def hold(**fields: Any) -> Any:
+        return ros_context.call(HoldMode, "/pilot/hold_mode", HoldMode.Request(**{"priority": -1, **fields}))
+
+    made = hold(mode="f_degraded_mode", requester="metacontroller", lease=1.5)
+    assert made.accepted and made.hold > 0, made.reason
+    wait_until(lambda: str(manager.actual("pilot")) == "active.f_degraded_mode", 10.0, "pilot degraded")
+    for _ in range(3):  # renewed: it lasts past its lease
+        time.sleep(0.7)
+        assert hold(hold=made.hold).accepted
+    refused = manager.change_mode("pilot", "f_normal_mode", requester="tree")
+    assert refused.refused and "by metacontroller (priority 60" in refused.reason
+    wait_until(lambda: not manager.holds(), 5.0, "the lease never ran out")  # not renewed: the client died
+    late = hold(hold=made.hold)
+    assert not late.accepted and late.reason == f"hold #{made.hold} ended: its lease of 1.5 s ran out"
+    again = hold(mode="f_slow_mode", requester="operator")
+    assert again.accepted and hold(hold=again.hold, release=True).accepted and not manager.holds()
+    # The command: held while it runs, released at its end.
+    assert main(["mode", "hold", "pilot", "f_degraded_mode", "--for", "1", "--lease", "0.6"]) == 0
+    out = capsys.readouterr().out
+    assert re.match(r"pilot: held in f_degraded_mode \(hold #\d+, lease 0\.6 s\); released in 1 s or at Ctrl-C\n"
+                    r"pilot: released\n$", out), out
+    assert not manager.holds() and str(manager.actual("pilot")) == "active.f_degraded_mode"
