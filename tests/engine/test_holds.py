@@ -84,14 +84,20 @@ QUEUE_TIMEOUT = 4.0
 
 @st.composite
 def held_runs(draw: st.DrawFn) -> tuple[Model, list[tuple[Any, ...]]]:
-    """A generated model and a sequence of holds, requests, releases, renewals and clock steps by
-    several requesters at several priorities."""
-    generated: GeneratedModel = draw(generated_models())
-    model = generated.load()
+    """A model (generated, or the pilot with its laser rule) and a sequence of holds, requests,
+    releases, renewals, node faults (rules may fire and hold) and clock steps by several
+    requesters at several priorities."""
+    if draw(st.booleans()):
+        model = bundled("pilot_rules")
+    else:
+        generated: GeneratedModel = draw(generated_models())
+        model = generated.load()
     parts = sorted(model.parts)
     steps: list[tuple[Any, ...]] = []
+    if "pilot" in model.parts and model.parts["pilot"].rules:  # in normal mode, where its rule watches
+        steps += [("request", "pilot", "f_normal_mode", "tree", None, None, False), ("run", 3.0)]
     for _ in range(draw(st.integers(1, 12))):
-        kind = draw(st.sampled_from(["hold", "request", "run", "release", "renew"]))
+        kind = draw(st.sampled_from(["hold", "request", "run", "release", "renew", "fault"]))
         if kind in ("hold", "request"):
             part = draw(st.sampled_from(parts))
             mode = draw(st.sampled_from(sorted(model.parts[part].modes)))
@@ -102,13 +108,18 @@ def held_runs(draw: st.DrawFn) -> tuple[Model, list[tuple[Any, ...]]]:
             steps.append((kind, part, mode, requester, priority, lease, queue))
         elif kind == "run":
             steps.append((kind, draw(st.floats(0.05, 3.0))))
+        elif kind == "fault":  # a node fails by itself (deactivate -> ERROR): rules may fire and hold
+            steps.append((kind, draw(st.sampled_from(sorted(node.name for node in model.nodes)))))
         else:
             steps.append((kind, draw(st.integers(0, 5))))
     return model, steps
 
 
 def check_holds(model: Model, steps: list[tuple[Any, ...]]) -> None:
-    system = SimulatedSystem(model, rules=False, recovery=False)
+    from sm_bt.engine.lifecycle import Outcome, Transition
+    from sm_bt.model.states import State
+
+    system = SimulatedSystem(model, recovery=False)
     manager = system.manager
     made = []
     queued = []
@@ -135,6 +146,9 @@ def check_holds(model: Model, steps: list[tuple[Any, ...]]) -> None:
                 assert "is held in" not in request.reason  # one requester: exactly as before
         elif step[0] == "run":
             system.run(step[1])
+        elif step[0] == "fault":
+            if system.backend.node(step[1]).state is State.ACTIVE:
+                system.backend.trigger(step[1], Transition.DEACTIVATE, Outcome.ERROR)
         elif made:
             hold = made[step[1] % len(made)]
             hold.release() if step[0] == "release" else hold.renew()
