@@ -16,10 +16,11 @@ from sm_bt.trees.pilot.demo import DEGRADED_FOR, REPAIR_AT, TREES, Auto, Demo, O
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--tree", type=_tree, default="pilot", metavar="TREE",
-                        help="contingencies in the tree (pilot, default), chosen by a metacontroller "
-                             "(metacontrol), or a mission tree file in XML (trees/pilot/pilot.xml is the pilot "
-                             "tree; {cycles} in it is --cycles)")
+    parser.add_argument("--tree", type=_tree, metavar="TREE",
+                        help="contingencies in the tree (pilot, the default), chosen by a metacontroller "
+                             "(metacontrol), left to the model's rule (rules, the default with --rules), or a "
+                             "mission tree file in XML (trees/pilot/pilot.xml is the pilot tree; {cycles} in it "
+                             "is --cycles)")
     parser.add_argument("--laser-failure-at", type=_time, default=15.0, metavar="SECONDS",
                         help="world time the laser breaks; 'never' for no failure (default 15)")
     parser.add_argument("--laser-repair-at", type=_time, default=Auto.AUTO, metavar="SECONDS",
@@ -34,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rules", action="store_true",
                         help="the model with the laser rule (pilot_rules): the manager itself switches to "
                              "degraded mode when the laser fails, and holds it there against lower-priority "
-                             "requests until the tree sees the scans healthy again")
+                             "requests (the tree's energy saving) until the tree sees the scans healthy again")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
     add_view_arguments(parser)
     parser.add_argument("--ros", action="store_true",
@@ -63,7 +64,8 @@ def _time(text: str) -> float | None:
 
 def run(args: argparse.Namespace) -> int:
     options = Options(laser_failure_at=args.laser_failure_at, laser_repair_at=args.laser_repair_at,
-                      cycles=args.cycles, speed=args.speed, quiet=args.quiet, tree=args.tree, ros=args.ros,
+                      cycles=args.cycles, speed=args.speed, quiet=args.quiet,
+                      tree=args.tree or ("rules" if args.rules else "pilot"), ros=args.ros,
                       rules=args.rules, view=args.view, view_host=args.host, record=args.record,
                       linger=args.view is not None)
     if not options.ros:

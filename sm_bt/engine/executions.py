@@ -251,6 +251,8 @@ class Executions:
         log.warning("request %s refused: %s", description, reason)
         request.refused = True
         request._finish(False, reason, now)
+        if part in self.model.parts:  # told, as any request's end (it never started)
+            self._ledger.emit(EventKind.REQUEST, part, f"{description} refused: {reason}", request=request)
         return request
 
     def _out_of_reach(self, node: str, target: StateMode) -> str:

@@ -164,7 +164,7 @@ class DiagnosticsPublisher:
         self._node.destroy_publisher(self._publisher)
 
     def requested(self, part: str, request: Request) -> None:
-        """A request made outside the engine's events (a refusal is done at once, with no event)."""
+        """A request made outside the engine's events (one refused for a name the model lacks)."""
         self._note(part, request)
 
     # -- events (in the manager's lock) --------------------------------------------------------------

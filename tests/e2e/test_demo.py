@@ -38,8 +38,11 @@ def test_demo_tells_the_whole_story(tree: str) -> None:
     assert_in_order(text, ["robot at wp_7", "patrol round 2 of 2 complete", "mission SUCCESS"])
 
 
-def test_with_the_laser_rule_the_manager_degrades_and_holds_until_the_tree_sees_the_laser_back() -> None:
-    code, text, demo = run_demo(rules=True)
+def test_with_the_laser_rule_the_manager_degrades_and_holds_against_the_trees_routine_changes() -> None:
+    """sm-bt demo --rules, the laser repaired late: the rule degrades the pilot and holds it; the
+    tree's routine energy saving for a low battery is refused, naming the rule, and the tree
+    recharges as the pilot is; once the scans are healthy the tree ends the hold."""
+    code, text, demo = run_demo(rules=True, tree="rules", laser_repair_at=200.0)
     assert code == 0, text
     assert_in_order(text, [
         "laser failure",
@@ -48,11 +51,15 @@ def test_with_the_laser_rule_the_manager_degrades_and_holds_until_the_tree_sees_
         "is unconfigured",
         "== pilot is now active.f_degraded_mode ==",
         "held by rule degrade_from_normal (priority 100): pilot, amcl",  # under the monitor's table
+        "battery low",
+        "<- change_mode pilot f_energy_saving_mode refused: pilot is held in active.f_degraded_mode by rule "
+        "degrade_from_normal (priority 100) since",
+        "robot at recharge_station",
         "laser repaired: scans healthy again",
         "## pilot no longer held by rule degrade_from_normal: superseded by request",
         "== pilot is now active.f_normal_mode ==",
         "mission SUCCESS"])
-    # The rule switched, not the tree: the tree's own switch found the pilot degraded already.
+    # The rule switched, not the tree (this tree leaves that to the model's rule).
     assert [r.requester for r in demo.tally.requests if str(r.target) == "active.f_degraded_mode"] == [
         "rule degrade_from_normal"]
 

@@ -86,6 +86,16 @@ def recharge() -> Behaviour:
     ])
 
 
+def recharge_if_allowed() -> Behaviour:
+    """Recharge in energy-saving mode if the manager allows it, else as the pilot is: with the
+    model's laser rule (``pilot_rules``) the rule holds degraded mode while the laser is down, and
+    the tree need not know (the manager refuses the change, naming the rule)."""
+    return py_trees.composites.Selector("Recharging", memory=True, children=[
+        hold_mode("Energy saving", SYSTEM, ENERGY_SAVING, go_and_recharge()),
+        go_and_recharge(" (as is)"),
+    ])
+
+
 def patrol_round(recharging: Behaviour) -> Behaviour:
     """One round of the seven waypoints, with ``recharging`` first whenever the battery is low.
 
@@ -112,34 +122,43 @@ def patrol(cycles: int, recharging: Behaviour | None = None) -> Behaviour:
 
 
 def contingencies() -> Behaviour:
-    """Always RUNNING: watches for the laser contingencies and switches mode. Back to normal mode
-    at the rules' priority: the tree sees the scans healthy again, which ends a laser rule's hold
-    of degraded mode (``pilot_rules``; nothing else tells the manager that the laser works)."""
-    laser_back = py_trees.composites.Sequence("Laser back", memory=True, children=[
-        ModeIs("Degraded?", SYSTEM, DEGRADED),
-        is_true("Scans healthy?", LASER_SCANS_OK, True),
-        ChangeMode(f"{NORMAL} again", SYSTEM, NORMAL, priority=PRIORITIES["rule"]),
-    ])
+    """Always RUNNING: watches for the laser contingencies and switches mode."""
     return py_trees.composites.Selector("Contingencies", memory=False, children=[
         switch_on_divergence("Laser lost", "laser_resender", SYSTEM, DEGRADED),
-        laser_back,
+        laser_back(),
         py_trees.behaviours.Running("Nominal"),
     ])
 
 
-def create_root(cycles: int = 2) -> Behaviour:
-    """The pilot mission: ``cycles`` patrol rounds (recharging as needed), then SUCCESS."""
+def laser_back() -> Behaviour:
+    """Scans healthy again while degraded -> normal mode, at the rules' priority: the tree sees the
+    laser work again, which ends a laser rule's hold of degraded mode (nothing else tells the
+    manager that the laser works)."""
+    return py_trees.composites.Sequence("Laser back", memory=True, children=[
+        ModeIs("Degraded?", SYSTEM, DEGRADED),
+        is_true("Scans healthy?", LASER_SCANS_OK, True),
+        ChangeMode(f"{NORMAL} again", SYSTEM, NORMAL, priority=PRIORITIES["rule"]),
+    ])
+
+
+def create_root(cycles: int = 2, *, rules: bool = False) -> Behaviour:
+    """The pilot mission: ``cycles`` patrol rounds (recharging as needed), then SUCCESS. With
+    ``rules``, for the model with the laser rule (``pilot_rules``): the manager switches to
+    degraded mode and holds it, so the tree only watches for the laser coming back and recharges
+    in energy-saving mode when the manager allows it."""
     start_up = py_trees.composites.Sequence("Start-up", memory=True, children=[
         ChangeState("Configure", SYSTEM, "configure"),
         ChangeMode(NORMAL, SYSTEM, NORMAL),
     ])
-    mission_body = patrol(cycles)
+    mission_body = patrol(cycles, recharge_if_allowed() if rules else None)
+    watching = (py_trees.composites.Selector("Contingencies", memory=False, children=[
+        laser_back(), py_trees.behaviours.Running("Nominal")]) if rules else contingencies())
     # Done when the patrol is: the contingencies never succeed (a switch they make counts as
     # still watching), which XML can say too (py_trees' XML has no SuccessOnSelected).
     mission = py_trees.composites.Parallel(
         "Patrol with contingencies",
         policy=py_trees.common.ParallelPolicy.SuccessOnOne(),
-        children=[py_trees.decorators.SuccessIsRunning("Keep watching", contingencies()), mission_body],
+        children=[py_trees.decorators.SuccessIsRunning("Keep watching", watching), mission_body],
     )
     return py_trees.composites.Sequence("Pilot", memory=False, children=[
         gather(),

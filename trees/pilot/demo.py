@@ -47,6 +47,7 @@ from sm_bt.view import View, attach_view
 
 TREES: dict[str, Callable[[int], py_trees.behaviour.Behaviour]] = {
     "pilot": lambda cycles: pilot.create_root(cycles),
+    "rules": lambda cycles: pilot.create_root(cycles, rules=True),
     "metacontrol": lambda cycles: pilot_metacontrol.create_root(cycles),
 }
 
