@@ -42,6 +42,11 @@ class Actual(NamedTuple):
         return state is wanted.state and state is not State.UNKNOWN and (
             state is not State.ACTIVE or self.mode == wanted.mode)
 
+    def meets(self, condition: StateMode) -> bool:
+        """A rule's condition holds: :meth:`is_`, and ``unknown`` holds for a part whose state is
+        not known (its node crashed or is gone), so that a rule can react to losing a part."""
+        return self.is_(condition) or (condition.state is State.UNKNOWN and self.state is State.UNKNOWN)
+
     def __str__(self) -> str:
         if self.state is State.ACTIVE and self.mode:
             return f"active.{self.mode}"

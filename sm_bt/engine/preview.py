@@ -356,7 +356,7 @@ def _rules(model: Model, config: Configuration, targets: Mapping[str, StateMode]
         return result
 
     def holds(rule: Rule, target: StateMode | None, actual: Actual) -> bool:
-        return target == rule.if_target and actual.is_(rule.if_part_state)
+        return target == rule.if_target and actual.meets(rule.if_part_state)
 
     start: list[str] = []
     stop: list[str] = []

@@ -133,7 +133,7 @@ class Reactions:
     def _matching_rule(self, divergence: Divergence, view: StateReader) -> Rule | None:
         for rule in self._model.parts[divergence.part].rules:
             condition = view.actual(rule.if_part)
-            if rule.if_target == divergence.target and condition.is_(rule.if_part_state) \
+            if rule.if_target == divergence.target and condition.meets(rule.if_part_state) \
                     and not self._users_choice(rule, view) and not self._undoes_users_choice(rule, view):
                 return rule
         return None

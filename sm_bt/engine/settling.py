@@ -69,4 +69,4 @@ class Settling:
                                  reaction.target)), request.requester, level, None, reaction.condition)
 
     def _is_in(self, part: str, state: StateMode) -> bool:
-        return self._actual(part).is_(state)
+        return self._actual(part).meets(state)

@@ -164,3 +164,30 @@ def test_recovery_attempts_come_back_after_the_window() -> None:
     assert not rig.events_of(EventKind.FAILED)
     assert len({e.request.id for e in rig.events_of(EventKind.REQUEST)
                 if e.request and e.request.origin is Origin.RECOVERY}) == 3
+
+
+def test_a_rule_can_react_to_losing_a_part_its_condition_unknown() -> None:
+    """`if_part: [laser_resender, unknown]`: the node crashed (or its process ended), its state is
+    unknown, and the rule sends the pilot where it needs no laser; when a new process of the node
+    appears, the rule's hold ends with its condition."""
+    from pathlib import Path
+
+    from sm_bt.model.loader import load_model_text
+
+    source = Path(bundled("pilot").path).read_text().replace("    modes:\n      __DEFAULT__:\n        amcl: inactive", (
+        "    rules:\n      laser_lost:\n        if_target: active.f_normal_mode\n"
+        "        if_part: [laser_resender, unknown]\n        new_target: active.f_degraded_mode\n"
+        "    modes:\n      __DEFAULT__:\n        amcl: inactive"), 1)
+    rig = SimulatedSystem(load_model_text(source, "pilot_lost.yaml"), recovery=False)
+    assert rig.finish(rig.manager.change_mode("pilot", "f_normal_mode")).succeeded
+    rig.crash("laser_resender")
+    rig.run(5.0)
+    assert [e.message for e in rig.events_of(EventKind.RULE)] == [
+        "rule laser_lost: laser_resender is unknown -> active.f_degraded_mode"]
+    # (Degraded mode wants the laser unconfigured: it is unknown, so the pilot's actual is too.)
+    assert str(rig.manager.target("pilot")) == "active.f_degraded_mode"
+    [hold] = rig.manager.holds()
+    assert hold.condition is not None and str(hold.condition[1]) == "unknown"
+    rig.restart("laser_resender")
+    rig.run(1.0)
+    assert not hold.active and hold.reason == "its condition is over: laser_resender is no longer unknown"
