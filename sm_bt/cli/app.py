@@ -18,7 +18,22 @@ import argparse
 import os
 import sys
 
-from sm_bt.cli import check, daemon, demo, manager, mission, modes, monitor, plan, remote, run, sim_nodes, test, view
+from sm_bt.cli import (
+    analyze,
+    check,
+    daemon,
+    demo,
+    manager,
+    mission,
+    modes,
+    monitor,
+    plan,
+    remote,
+    run,
+    sim_nodes,
+    test,
+    view,
+)
 from sm_bt.cli.common import PROG, CliError, Command, UsageError
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.types import DEFAULT_MODE
@@ -27,6 +42,14 @@ from sm_bt.model.types import DEFAULT_MODE
 COMMANDS: list[Command] = [
     Command("check", "validate model files (exit 1 if any fails to load)", check.add_arguments, check.run,
             description="Load each model strictly and report every error as FILE:LINE: error: MESSAGE."),
+    Command("analyze", "find the flaws of a well-formed model (and its trees): reachability, inference, rules, "
+            "faults", analyze.add_arguments, analyze.run,
+            description="Explore MODEL (and the trees that use it) for what breaks robots: modes no request reaches, "
+                        "modes inference cannot tell apart, rules that go round in a circle or undo a change, "
+                        "every single node fault (or pair, --faults 2) from every mode of the top systems run on "
+                        "simulated nodes (where each system ends, which rules fire), and what a tree asks for that a "
+                        "fault makes unreachable. Each finding as FILE:LINE: LEVEL: MESSAGE [KIND]. Exit status 1 "
+                        "when there is an error."),
     Command("modes", "print the systems, modes, rules and node parameters of a model", modes.add_arguments,
             modes.run, description="Print the hierarchy of a model: systems (nested ones indented) with "
                                    f"their modes and rules, then every node with its parameter sets. "

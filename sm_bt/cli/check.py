@@ -45,6 +45,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also say which constructs of each model the reference manager (micro-ROS/system_modes) "
                              "misreads or handles differently (sm_bt's extensions, ...), with their lines; exit "
                              "status 1 if it cannot read one")
+    parser.add_argument("--deep", action="store_true",
+                        help="also analyse each model as `sm-bt analyze MODEL` does (every single node fault run on "
+                             "simulated nodes, reachability, inference, rules); exit status 1 on an error-level "
+                             "finding")
     parser.add_argument("--debug", action="store_true",
                         help="on an internal error (a bug in sm-bt), print its traceback and go on")
 
@@ -115,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
         print_issues(model.warnings, sys.stdout)
         if args.reference:
             failed += not _guarded(name, args.debug, partial(_check_reference, model))
+        if args.deep:
+            failed += not _guarded(name, args.debug, partial(_analyze, model))
     stubs = _stubs(args.stubs) if args.stubs and trees else {}
     failed += stubs is None
     paired: dict[str, Model] = {}  # models named by trees or --model, loaded once each
@@ -125,6 +131,16 @@ def run(args: argparse.Namespace) -> int:
     if len(names) > 1 and (failed or len(names) > len(args.models)):  # a tally where one helps
         print(f"{plural(len(names), 'file')} checked, {failed} failed", file=sys.stderr if failed else sys.stdout)
     return 1 if failed else 0
+
+
+def _analyze(model: Model) -> bool:
+    """``--deep``: the model's analysis (:mod:`sm_bt.analysis`); False when it found an error."""
+    from sm_bt.analysis import analyze
+    from sm_bt.cli.analyze import print_analysis
+
+    analysis = analyze(model)
+    print_analysis(analysis)
+    return not analysis.errors
 
 
 def _check_reference(model: Model) -> bool:
