@@ -49,7 +49,10 @@ class Analysis:
         return [f for f in self.findings if f.level is Level.ERROR]
 
     def as_json(self) -> dict[str, Any]:
-        return {"model": self.model.path, "trees": [use.path for use in self.trees],
+        return {"model": self.model.path,
+                "trees": [{"path": use.path, "modes": [f"{part} {mode}" for part, mode in use.modes],
+                           "transitions": [f"{part} {label}" for part, label in use.transitions],
+                           "watches": sorted(part or "*" for part in use.watched)} for use in self.trees],
                 "findings": [f.as_json() for f in self.findings],
                 "faults": [{"start": o.start, "faults": [str(f) for f in o.faults],
                             "ends": {name: {"actual": actual, "diverged": why or None}

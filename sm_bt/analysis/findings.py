@@ -28,6 +28,7 @@ class Kind(str, enum.Enum):
     RULE_NEVER_FIRES = "rule-never-fires"
     RULE_PING_PONG = "rule-ping-pong"  # rules switch a system back and forth
     RULE_UNDOES_REQUEST = "rule-undoes-request"  # a rule's condition is a mode the model asks for
+    RULE_SHADOWED = "rule-shadowed"  # an earlier rule with the same condition always fires first
     FAULT_UNHANDLED = "fault-unhandled"  # a fault leaves a system diverged, no rule reacts
     TREE_UNREACHABLE = "tree-unreachable"  # a tree asks for what a fault makes unreachable, uncovered
     TREE_UNASKED = "tree-unasked"  # modes no tree asks for

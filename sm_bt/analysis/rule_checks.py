@@ -22,7 +22,15 @@ def rule_findings(model: Model) -> list[Finding]:
         if not isinstance(part, SystemPart):
             continue
         rules = list(part.rules)
-        for rule in rules:
+        for index, rule in enumerate(rules):
+            first = next((r for r in rules[:index] if (r.if_target, r.if_part, r.if_part_state) ==
+                          (rule.if_target, rule.if_part, rule.if_part_state)), None)
+            if first is not None and first.new_target != rule.new_target:
+                findings.append(Finding(
+                    Kind.RULE_SHADOWED, Level.WARNING, rule.location,
+                    f"rule {rule.name} of {rule.system} never fires: {first.name} has the same condition "
+                    f"({rule.if_part} {rule.if_part_state} while {rule.if_target}) and comes first (rules are tried "
+                    f"in order of name), sending {rule.system} to {first.new_target} instead of {rule.new_target}"))
             circle = _circle(rule, rules)
             if circle is not None and circle[0] is min(circle, key=lambda r: r.name):  # each circle once
                 findings.append(Finding(

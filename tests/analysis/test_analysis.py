@@ -299,3 +299,73 @@ def test_alike_nodes_are_run_once_for_all_of_them(tmp_path: Path) -> None:
     apart = load_model(model_of(tmp_path, twins.replace("        camera2: active\n", "        camera2: inactive\n",
                                                         1), "apart.yaml"))
     assert alike_nodes(apart) == {"drive": [], "camera": [], "camera2": []}
+
+
+#: The model of system_modes #94 (DMARCE's safety benchmark): a guard node's own mode switches the
+#: system, both ways.
+SAFETY = """\
+safety:
+  ros__parameters:
+    type: system
+    parts:
+      manipulator
+      guard
+    modes:
+      __DEFAULT__:
+        manipulator: active.__DEFAULT__
+        guard: active.__DEFAULT__
+      COMPROMISED:
+        manipulator: active.COMPROMISED
+        guard: active.COMPROMISED
+    rules:
+      guard_detect_compromise_in_default:
+        if_target: active.__DEFAULT__
+        if_part: [guard, active.COMPROMISED]
+        new_target: active.COMPROMISED
+      guard_detect_default_in_compromise:
+        if_target: active.COMPROMISED
+        if_part: [guard, active.__DEFAULT__]
+        new_target: active.__DEFAULT__
+manipulator:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          max_torque: 0.5
+      COMPROMISED:
+        ros__parameters:
+          max_torque: 0.1
+guard:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          compromised: false
+      COMPROMISED:
+        ros__parameters:
+          compromised: true
+"""
+
+
+def test_the_guard_triggered_rules_of_system_modes_94_are_found(tmp_path: Path) -> None:
+    path = model_of(tmp_path, SAFETY, "safety.yaml")
+    found = kinds(path, faults=0)[Kind.RULE_UNDOES_REQUEST]
+    assert [f.split(": warning: ")[0] for f in found] == [
+        f"safety.yaml:{line_of(path, 'guard_detect_compromise_in_default:')}",
+        f"safety.yaml:{line_of(path, 'guard_detect_default_in_compromise:')}"]
+    assert "a change from __DEFAULT__ to active.COMPROMISED passes through that" in found[1]
+
+
+def test_a_rule_with_the_condition_of_an_earlier_one_is_shadowed(tmp_path: Path) -> None:
+    rules = CIRCLE.split("      speed_up:")[0] + ("      stop_all:\n        if_target: active.NORMAL\n"
+                                                 "        if_part: [drive, unconfigured]\n"
+                                                 "        new_target: active.__DEFAULT__\n")
+    path = model_of(tmp_path, ROBOT.replace("#RULES\n", rules))
+    assert kinds(path, faults=0)[Kind.RULE_SHADOWED] == [
+        f"robot.yaml:{line_of(path, 'stop_all:')}: warning: rule stop_all of robot never fires: slow_down has the "
+        "same condition (drive unconfigured while active.NORMAL) and comes first (rules are tried in order of "
+        "name), sending robot to active.SLOW instead of active.__DEFAULT__"]
+    assert Kind.RULE_SHADOWED not in kinds(model_of(tmp_path, ROBOT.replace("#RULES\n", CIRCLE), "ok.yaml"),
+                                           faults=0)
