@@ -44,7 +44,7 @@ test:
 
 # The manager's property tests (tests/engine/test_manager_properties.py) and the loader's fuzz tests
 # (tests/model/test_model_fuzz.py) with the hypothesis `stress` profile: at least 10,000 scenarios and
-# 100,000 model files, then a summary (requests by outcome, recoveries, rules, files by outcome);
+# 100,000 model files (and 2,000 generated models analysed by sm-bt analyze), then a summary (requests by outcome, recoveries, rules, files by outcome);
 # 30 partition/heal cycles across two hosts (tests/e2e/stress_partitions.py: network namespaces, root),
 # nodes whose transitions take 30 s brought up over ROS 2 (tests/e2e/stress_long_transitions.py), and
 # 10,000 interleavings of subscriptions and changes on the manager's topics (tests/ros/test_ros_topics_property.py).
@@ -54,7 +54,8 @@ stress: $(STAMP)
 	SM_BT_TESTS_NEED_ALL=1 SM_BT_HYPOTHESIS_PROFILE=stress PYTHONPATH=tests/support \
 		$(BIN)/python -m pytest -q -s -p stress_summary --timeout=0 -o faulthandler_timeout=0 \
 		tests/engine/test_manager_properties.py tests/engine/test_preview.py tests/engine/test_rollback.py \
-		tests/engine/test_holds.py tests/model/test_model_fuzz.py tests/e2e/stress_partitions.py \
+		tests/engine/test_holds.py tests/analysis/test_analysis.py tests/model/test_model_fuzz.py \
+		tests/e2e/stress_partitions.py \
 		tests/e2e/stress_long_transitions.py tests/ros/test_ros_topics_property.py
 
 # The performance goals (docs/performance.md): a table with each goal, build/bench/results.json

@@ -8,7 +8,10 @@ import re
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis_profiles import examples
 from model_files import bundled
+from model_generator import GeneratedModel, generated_models
 
 from sm_bt.analysis import Kind, Level, analyze
 from sm_bt.cli import main
@@ -369,3 +372,14 @@ def test_a_rule_with_the_condition_of_an_earlier_one_is_shadowed(tmp_path: Path)
         "name), sending robot to active.SLOW instead of active.__DEFAULT__"]
     assert Kind.RULE_SHADOWED not in kinds(model_of(tmp_path, ROBOT.replace("#RULES\n", CIRCLE), "ok.yaml"),
                                            faults=0)
+
+
+@examples(100, stress=2000)
+@given(generated_models())
+def test_any_model_is_analysed_and_every_finding_has_its_file_and_line(generated: GeneratedModel) -> None:
+    model = generated.load()
+    analysis = analyze(model, faults=1)
+    for finding in analysis.findings:
+        assert finding.location.file == model.path and finding.location.line > 0, finding
+    assert analysis.outcomes, "no fault run: every model has nodes and a top system"
+    json.dumps(analysis.as_json())
