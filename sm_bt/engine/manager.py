@@ -44,12 +44,12 @@ from sm_bt.engine.lifecycle import (
 from sm_bt.engine.presence import NodeReports, NodeReturn
 from sm_bt.engine.preview import Configuration, Preview, preview
 from sm_bt.engine.reactions import Reactions
+from sm_bt.engine.request_checks import check_node, check_part, failure_policy, mode_target, modes_of, state_target
 from sm_bt.engine.requests import Origin, Request
 from sm_bt.engine.responses import Responses
 from sm_bt.engine.serialiser import Serialiser
 from sm_bt.engine.settling import Settling
 from sm_bt.engine.snapshots import PartSnapshot
-from sm_bt.engine.request_checks import check_node, check_part, failure_policy, mode_target, modes_of, state_target
 from sm_bt.model.errors import RequestError
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, Model, NodePart
