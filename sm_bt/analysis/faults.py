@@ -1,7 +1,8 @@
 """Faults: what rules and recovery make of every single node fault (and every pair, with
 ``faults=2``), run with the real engine on simulated nodes in virtual time.
 
-From each mode of each top system, each node in turn (or each pair of nodes) suffers a fault:
+From each mode of each top system (and of each node of no system), each node in turn (or each
+pair of nodes) suffers a fault:
 
 * ``crash``: it stops answering (reported gone after the backend's ``vanish_after``);
 * ``fails``: an active node fails by itself (deactivating, error processing, unconfigured), as
@@ -22,7 +23,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 from sm_bt.analysis.findings import Finding, Kind, Level
-from sm_bt.analysis.reach import top_systems
+from sm_bt.analysis.reach import top_parts
 from sm_bt.analysis.symmetry import alike_nodes
 from sm_bt.engine.events import EventKind
 from sm_bt.engine.lifecycle import Transition
@@ -89,7 +90,7 @@ def explore(model: Model, faults: int = 1, wanted: Iterable[tuple[str, str]] = (
     outcomes = []
     asked = sorted(set(wanted))
     classes = alike_nodes(model)
-    for system in top_systems(model):
+    for system in top_parts(model):
         for mode in model.parts[system].modes:
             for chosen in _fault_sets(model, faults):
                 outcome = _run(model, system, mode, chosen, asked)

@@ -21,6 +21,12 @@ def top_systems(model: Model) -> list[str]:
     return [name for name, part in model.parts.items() if isinstance(part, SystemPart) and name not in inner]
 
 
+def top_parts(model: Model) -> list[str]:
+    """The parts no system has as a part: the top systems, and nodes of no system."""
+    inner = {child for part in model.parts.values() if isinstance(part, SystemPart) for child in part.parts}
+    return [name for name in model.parts if name not in inner]
+
+
 def asked_for(model: Model) -> set[tuple[str, str]]:
     """(part, mode) that some mode of a top system asks for, down the hierarchy."""
     found: set[tuple[str, str]] = set()

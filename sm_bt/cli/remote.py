@@ -60,6 +60,9 @@ def add_mode_arguments(parser: argparse.ArgumentParser) -> None:
                      help="ask sm-bt manager what the change would do, and do nothing: the plan (stages, calls, "
                           "parameters), or why it would be refused (exit 1)")
     _who(put)
+    put.add_argument("--queue", action="store_true",
+                     help="held back by a hold of a higher priority, wait for it to end (within the manager's "
+                          "request timeout) instead of being refused; needs sm-bt manager")
     hold = actions.add_parser("hold", help="hold the part in MODE while this command runs: requests of a lower "
                                            "priority that would change it are refused, naming the holder; Ctrl-C "
                                            "(or --for) releases it, and if the command dies the lease runs out")
@@ -173,15 +176,17 @@ def run_mode(args: argparse.Namespace) -> int:
             possible, lines = client.preview_change(part, mode=args.mode)
             print("\n".join(lines))
             return 0 if possible else 1
-        if args.priority is not None or args.requester is not None or client.offers(part, "request_change"):
+        asks = args.priority is not None or args.requester is not None or args.queue
+        if asks or client.offers(part, "request_change"):
             accepted, reason = client.request_change(part, mode=args.mode, requester=args.requester or "",
-                                                     priority=-1 if args.priority is None else args.priority)
+                                                     priority=-1 if args.priority is None else args.priority,
+                                                     queue=args.queue)
         else:  # the reference's manager: yes or no
             accepted, reason = client.change_mode(part, args.mode), "its log says why"
         if not accepted:
             raise CliError(f"the manager refused mode {args.mode!r} for {part}: {reason}")
         if not args.wait:
-            print(f"{part}: change to {args.mode} accepted")
+            print(f"{part}: change to {args.mode} " + (f"accepted, {reason}" if accepted and reason else "accepted"))
             return 0
         seconds = client.wait_for_mode(part, args.mode, client.sent)
         print(f"{part}: {args.mode} confirmed {seconds:.2f} s after the request")

@@ -273,15 +273,16 @@ class ModeClient:
         return bool(response.possible), list(response.lines)
 
     def request_change(self, part: str, mode: str = "", transition: str = "", requester: str = "",
-                       priority: int = -1) -> tuple[bool, str]:
+                       priority: int = -1, queue: bool = False) -> tuple[bool, str]:
         """Ask ``sm-bt manager`` for ``mode`` (or ``transition``) of ``part`` as ``requester`` at
         ``priority`` (-1: the requester's) through sm_bt's own ``/{part}/request_change``: whether
-        it was accepted, and why not. The reference's manager has none: :class:`ManagerUnreachable`."""
+        it was accepted (with ``queue``, it may wait for a hold to end: the reason says so), and why
+        not. The reference's manager has none: :class:`ManagerUnreachable`."""
         from sm_bt_msgs.srv import RequestChange
 
         try:
             response = self._call(RequestChange, part, "request_change", RequestChange.Request(
-                mode=mode, transition=transition, requester=requester, priority=priority))
+                mode=mode, transition=transition, requester=requester, priority=priority, queue=queue))
         except ManagerUnreachable as error:
             raise ManagerUnreachable(f"{error} (a requester or a priority needs sm-bt manager: the reference's "
                                      "manager has neither)") from None

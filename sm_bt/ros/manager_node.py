@@ -222,17 +222,18 @@ class ModeManagerServer:
         log.debug("-> callback request_change of %s: %r %r [%s, %s]", part, request.mode, request.transition,
                   requester, priority)
         try:
-            handle = (self._manager.change_state(part, request.transition, requester=requester, priority=priority)
-                      if request.transition else
+            handle = (self._manager.change_state(part, request.transition, requester=requester, priority=priority,
+                                                 queue=request.queue) if request.transition else
                       self._manager.change_mode(part, request.mode or DEFAULT_MODE, requester=requester,
-                                                priority=priority))
+                                                priority=priority, queue=request.queue))
         except RequestError as error:  # a name the model does not have: nothing is touched
             log.warning("request_change of %s refused: %s", part, error)
             response.accepted, response.reason = False, str(error)
             return response
         self._told(part, handle)
         response.accepted, response.request = not handle.refused, handle.id
-        response.reason = handle.reason if handle.refused else ""
+        response.reason = handle.reason if handle.refused else (handle.feedback if handle.feedback.startswith(
+            "queued: ") else "")
         return response
 
     def _hold_mode(self, part: str, request: Any, response: Any) -> Any:

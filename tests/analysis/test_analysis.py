@@ -245,6 +245,10 @@ def test_a_tree_request_a_fault_makes_unreachable_needs_a_contingency(tmp_path: 
         f"mission.xml:{line_of(tree, '<ChangeMode')}: warning: the tree asks for robot NORMAL, which a fault of drive, "
         "camera makes unreachable, and no contingency of the tree (OnDivergence, SwitchOnDivergence) watches them"]
     assert found[Kind.TREE_UNASKED] == ["robot.yaml:1: note: no tree asks for robot SLOW, robot __DEFAULT__"]
+    every = tmp_path / "every.xml"
+    every.write_text(TREE.replace("#WATCH\n", '      <ChangeMode part="robot" mode="SLOW"/>\n'
+                                              '      <ChangeMode part="robot" mode="__DEFAULT__"/>\n'))
+    assert Kind.TREE_UNASKED not in kinds(path, (every,), faults=0)
     watched = tmp_path / "watched.xml"
     watched.write_text(TREE.replace("#WATCH\n", '      <SwitchOnDivergence name="Lost" system="robot" mode="SLOW"/>\n'))
     assert Kind.TREE_UNREACHABLE not in kinds(path, (watched,))

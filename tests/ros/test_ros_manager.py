@@ -351,6 +351,14 @@ def test_requests_through_the_interface_come_from_the_operator_and_respect_holds
     assert not metacontroller.accepted
     assert re.fullmatch(r"pilot is held in active\.f_degraded_mode by rule \(priority 100\) since \d+\.\d s",
                         metacontroller.reason), metacontroller.reason
+    # Queued, it waits for the hold to end (released here), then goes ahead.
+    queued = ros_context.call(RequestChange, "/pilot/request_change", RequestChange.Request(
+        mode="f_performance_mode", requester="metacontroller", priority=-1, queue=True))
+    assert queued.accepted and queued.reason.startswith("queued: pilot is held in active.f_degraded_mode"), queued
+    rule.release()
+    wait_until(lambda: str(manager.actual("pilot")) == "active.f_performance_mode", 10.0, "the queued change")
+    rule = manager.hold("pilot", "f_degraded_mode", requester="rule")
+    settle(pilot, rule.request)
     code = main(["mode", "set", "pilot", "f_slow_mode", "--timeout", "5"])  # the operator's shell
     err = capsys.readouterr().err
     assert code == 1 and err.startswith("sm-bt: error: the manager refused mode 'f_slow_mode' for pilot: pilot is "
