@@ -8,7 +8,7 @@ A frame is a plain dict (JSON-ready), format 2::
      "changes": {id: {"status", "feedback", "details"}},  # otherwise the behaviours that changed, only what changed
      "visited": [id, ...],                            # the path ticked last, when it changed (always in a key frame)
      "blackboard": {key: value},                      # the visited behaviours' blackboard values that changed
-     "modes": [{"part", "kind", "target", "actual", "inferred", "cause", "error"}, ...],  # the table, when it changed
+     "modes": [{"part", "kind", "target", "actual", "inferred", "cause", "error", "held_by"}, ...],  # the table
      "events": [{"time", "kind", "part", "text", ...}, ...]}  # the manager's events since the frame before, if any
 
 A request's events also carry ``request`` (its number), ``done`` and ``ok`` (the timeline draws
@@ -304,7 +304,8 @@ def _mode_json(row: Row) -> dict[str, Any]:
     actual = f"{row.raw_state}.{row.raw_mode}" if row.raw_mode else row.raw_state
     return {"part": row.part, "kind": row.kind, "target": target, "actual": actual,
             "inferred": bool(row.state_inferred or row.mode_inferred),
-            "cause": row.cause.value if row.cause is not None else None, "error": bool(row.error)}
+            "cause": row.cause.value if row.cause is not None else None, "error": bool(row.error),
+            "held_by": row.held_by or None}
 
 
 __all__ = ["RESCAN", "Frame", "FrameMaker", "behaviour_json"]

@@ -371,3 +371,23 @@ def test_the_assets_come_whole_from_the_wheel() -> None:
     assert sorted(files) == sorted(NEEDED) and sum(map(len, files.values())) == 1_215_399
     assert files["py_trees-0.6.js"].startswith(b"/*!\n * A library for rendering, with jointjs, a behaviour tree")
     assert all((ASSETS / name).read_bytes() == content for name, content in files.items())
+
+
+def test_who_holds_a_part_is_a_column_of_the_modes_table_while_one_does(tmp_path: Path) -> None:
+    """sm-bt demo --rules: while the laser rule holds degraded mode, the table says so on each
+    held part; before the laser fails, nobody holds anything and the column is not there."""
+    recording = tmp_path / "rules.jsonl"
+    demo = Demo(Options(speed=0.0, cycles=1, rules=True, tree="rules", laser_repair_at=200.0, quiet=True,
+                        record=str(recording)), Console(file=io.StringIO(), width=120))
+    assert demo.run() == 0
+    server = ViewServer(port=0, frames=read_recording(recording))
+    try:
+        held = _browse(f"{server.url}?check&at=60", screenshot=SHOTS / "held-1280x800.png")
+        before = _browse(f"{server.url}?check&at=10")
+    finally:
+        server.close()
+    _assert_nothing_cut(_report(held), "the held-by column")
+    assert '<table id="modes" class="holding">' in held
+    assert held.count('<td class="held">rule degrade_from_normal (priority 100)</td>') == 5  # pilot and its 4 nodes
+    assert '<table id="modes" class="">' in before or '<table id="modes">' in before
+    assert '<td class="held">rule' not in before

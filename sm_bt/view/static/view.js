@@ -100,8 +100,14 @@ function showModes(state) {
     tr.appendChild(breakable(row.target || "-"));
     tr.appendChild(breakable(row.actual + (row.inferred ? " (*)" : "")));
     tr.appendChild(text("td", row.cause || ""));
+    var held = text("td", row.held_by || "");  // who holds the part (a column shown only while one does)
+    held.className = "held";
+    tr.appendChild(held);
     body.appendChild(tr);
   });
+  document.getElementById("modes").classList.toggle("holding", state.modes.some(function (row) {
+    return Boolean(row.held_by);
+  }));
   var status = document.getElementById("status");
   status.textContent = state.status;
   status.className = "status " + state.status;
