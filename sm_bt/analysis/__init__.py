@@ -26,7 +26,7 @@ from typing import Any
 from sm_bt.analysis.ambiguity import ambiguity
 from sm_bt.analysis.faults import Outcome, explore, fault_findings
 from sm_bt.analysis.findings import Finding, Kind, Level, in_file_order
-from sm_bt.analysis.reach import reachability
+from sm_bt.analysis.reach import reachability, routes
 from sm_bt.analysis.rule_checks import rule_findings
 from sm_bt.analysis.tree_checks import TreeUse, tree_findings, tree_use
 from sm_bt.model.types import Model
@@ -43,6 +43,8 @@ class Analysis:
     findings: list[Finding]
     outcomes: list[Outcome] = field(default_factory=list)
     trees: list[TreeUse] = field(default_factory=list)
+    #: From each start, each mode of each top system: its plan's calls, or why it cannot be made.
+    routes: list[tuple[str, str, str, int | str]] = field(default_factory=list)
 
     @property
     def errors(self) -> list[Finding]:
@@ -59,7 +61,10 @@ class Analysis:
                                      for name, (actual, why) in o.ends.items()},
                             "rules": [{"rule": rule, "system": system, "target": target}
                                       for rule, system, target in o.rules],
-                            "settled_after": o.settled_after} for o in self.outcomes]}
+                            "settled_after": o.settled_after} for o in self.outcomes],
+                "routes": [{"from": start, "system": system, "mode": mode,
+                            ("calls" if isinstance(plan, int) else "refused"): plan}
+                           for start, system, mode, plan in self.routes]}
 
 
 def analyze(model: Model, trees: Sequence[str | Path] = (), *, faults: int = 1) -> Analysis:
@@ -70,4 +75,4 @@ def analyze(model: Model, trees: Sequence[str | Path] = (), *, faults: int = 1) 
     outcomes = explore(model, faults, wanted) if faults > 0 else []
     findings = [*reachability(model), *ambiguity(model), *rule_findings(model),
                 *fault_findings(model, outcomes), *tree_findings(model, uses, outcomes)]
-    return Analysis(model, in_file_order(findings), outcomes, uses)
+    return Analysis(model, in_file_order(findings), outcomes, uses, routes(model))

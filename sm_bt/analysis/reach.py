@@ -108,3 +108,16 @@ def reachability(model: Model) -> list[Finding]:
                                         f"that for an override of {above[name]}'s target",
                                         f"sm-bt mode set {name} {mode_name}"))
     return findings
+
+
+def routes(model: Model) -> list[tuple[str, str, str, int | str]]:
+    """From each start (:func:`starts`), each mode of each top system: (start, system, mode, the
+    number of calls its plan sends, or why it cannot be made)."""
+    found: list[tuple[str, str, str, int | str]] = []
+    configs = [(label, configuration(model, nodes)) for label, nodes in starts(model)]
+    for system in top_systems(model):
+        for mode in model.parts[system].modes:
+            for label, config in configs:
+                plan = preview(model, config, system, StateMode(State.ACTIVE, mode), f"change_mode {system} {mode}")
+                found.append((label, system, mode, plan.calls if plan.possible else plan.refused))
+    return found

@@ -21,7 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("trees", nargs="*", metavar="TREE.xml", help="mission trees that use the model")
     parser.add_argument("--faults", type=int, choices=(0, 1, 2), default=1,
                         help="node faults per run: every single one (1, the default), every pair (2), none (0)")
-    parser.add_argument("--table", action="store_true", help="print every fault run's outcome too")
+    parser.add_argument("--table", action="store_true",
+                        help="print the plans from each start to each mode of the top systems, and every fault "
+                             "run's outcome, too")
     parser.add_argument("--json", action="store_true", help="print the findings and the runs as JSON")
     add_lenient(parser)
 
@@ -46,6 +48,11 @@ def run(args: argparse.Namespace) -> int:
 def print_analysis(analysis: Analysis, *, table: bool = False) -> None:
     for finding in analysis.findings:
         print(finding)
+    if table and analysis.routes:
+        print("plans:")
+        for start, system, mode, plan in analysis.routes:
+            print(f"  from {start}: change_mode {system} {mode}: "
+                  + (f"{plan} calls" if isinstance(plan, int) else f"cannot be made: {plan}"))
     if table and analysis.outcomes:
         print("fault runs:")
         for outcome in analysis.outcomes:

@@ -273,6 +273,11 @@ def test_the_command_prints_findings_with_lines_and_json(capsys: pytest.CaptureF
     assert main(["analyze", "pilot", "--json", "--faults", "0"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert {f["kind"] for f in data["findings"]} == {"ambiguous"} and data["faults"] == []
+    assert main(["analyze", "pilot", "--table", "--faults", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "  from the start (every node unconfigured): change_mode pilot f_degraded_mode: 8 calls\n" in out
+    assert "  pilot=active.f_normal_mode, crash of amcl: pilot unknown (diverged: part state unknown (amcl: no " \
+           "answer for 1.0 s (crashed?))); no rule; 3.0 s\n" in out
     bad_tree = tmp_path / "bad.xml"
     bad_tree.write_text(TREE.replace("#WATCH\n", "").replace('mode="NORMAL"', 'mode="NORMALL"'))
     assert main(["analyze", str(path), str(bad_tree)]) == 1
