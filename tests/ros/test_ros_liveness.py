@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import re
 import signal
+import threading
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -75,6 +76,31 @@ def _reachable(ros: RosRuntime, names: tuple[str, ...] = ("amcl", "controller_se
     wait_until(lambda: all(ros.manager.observation(n).reachable for n in names), 15.0, "nodes not discovered")
 
 
+class Starved:
+    """How long this process (the manager's, here) went without running while in the block: a thread
+    that sleeps 10 ms at a time keeps the worst oversleep. On a machine so loaded that the process
+    itself waited for a core, a bound of the manager's own can only hold that much later."""
+
+    def __init__(self) -> None:
+        self.worst = 0.0
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="starved", daemon=True)
+
+    def _watch(self) -> None:
+        while not self._done.is_set():
+            asked = time.monotonic()
+            time.sleep(0.01)
+            self.worst = max(self.worst, time.monotonic() - asked - 0.01)
+
+    def __enter__(self) -> Starved:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self._thread.join(1.0)
+
+
 class Stopped:
     """SIGSTOP a node process (started with :data:`UDP_ONLY`) now, SIGCONT when done (also when the test fails)."""
 
@@ -124,7 +150,7 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
     wait_until(lambda: statuses(received, "pilot"), 5.0, "no /diagnostics")
     manager = runtime.manager
     clients = {name: runtime.backend._peers[name].change_state for name in NODES}
-    with Stopped(nodes) as stopped:
+    with Stopped(nodes) as stopped, Starved() as starved:
         request = manager.change_mode("pilot", "f_normal_mode")
         assert not request.refused, "the manager did not know yet: accepted"
         took = wait_until(lambda: request.done, 5.0, "the request did not end")
@@ -134,8 +160,9 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
         # The window the verdict names: 0.9 s, or wider where the backend learned from slow probes
         # (a loaded machine) that the link is slow.
         window = max(WINDOW, float(verdict.group(2)))
-        assert took <= window + LATENCY, f"ended {took:.2f} s after the node stopped answering (stopped at " \
-                                         f"{stopped.at:.2f}, window {window:g} s)"
+        assert took <= window + LATENCY + starved.worst, (
+            f"ended {took:.2f} s after the node stopped answering (stopped at {stopped.at:.2f}, window "
+            f"{window:g} s, this process stood still for at most {starved.worst:.2f} s)")
         # The configure requests abandoned unanswered are dropped with their clients: a DDS writer
         # would send them again once the node answers, and the node would configure late.
         wait_until(lambda: not any(manager.observation(name).reachable for name in NODES), 1.0, "not all unreachable")
@@ -154,7 +181,7 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
 
         wait_until(lambda: failed(), 2.0, "the failure is not on /diagnostics")
         arrived, status = failed()[0]
-        assert arrived - stopped.at <= window + LATENCY + 0.1
+        assert arrived - stopped.at <= window + LATENCY + 0.1 + starved.worst
         assert REASON.search(_values(status)["last_request_reason"]), _values(status)
         assert status.name == "sm_bt_liveness_test: pilot"
         # Each node's verdict reaches /diagnostics with the next gathering (the request's failure went
