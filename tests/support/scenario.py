@@ -467,6 +467,8 @@ class _Runner:
     # -- recording -------------------------------------------------------------------------------
 
     def _on_event(self, event: Event) -> None:
+        if event.request is not None and event.request.refused:
+            return  # told, but never accepted: nothing started, no target set (I9 checks it)
         if event.request is not None and event.request.id in self.seen:
             self.seen[event.request.id].announced = True
         elif event.request is not None:
