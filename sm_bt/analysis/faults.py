@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from sm_bt.analysis.findings import Finding, Kind, Level
 from sm_bt.analysis.reach import top_parts
 from sm_bt.analysis.symmetry import alike_nodes
-from sm_bt.engine.events import EventKind
 from sm_bt.engine.lifecycle import Transition
+from sm_bt.engine.requests import Origin, Request
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, SystemPart
 from sm_bt.sim import SimulatedSystem
@@ -65,7 +65,6 @@ class Outcome:
     ends: dict[str, tuple[str, str]] = field(default_factory=dict)
     #: The rules that fired, in order, with the system's new target.
     rules: list[tuple[str, str, str]] = field(default_factory=list)
-    gave_up: list[str] = field(default_factory=list)
     settled_after: float | None = None
     #: The changes asked for (by trees) that cannot be made at the end, with why.
     blocked: dict[tuple[str, str], str] = field(default_factory=dict)
@@ -92,7 +91,7 @@ def explore(model: Model, faults: int = 1, wanted: Iterable[tuple[str, str]] = (
     classes = alike_nodes(model)
     for system in top_parts(model):
         for mode in model.parts[system].modes:
-            for chosen in _fault_sets(model, faults):
+            for chosen in _fault_sets(model, faults, classes):
                 outcome = _run(model, system, mode, chosen, asked)
                 if outcome is not None:
                     if len(chosen) == 1:
@@ -101,10 +100,10 @@ def explore(model: Model, faults: int = 1, wanted: Iterable[tuple[str, str]] = (
     return outcomes
 
 
-def _fault_sets(model: Model, size: int) -> Iterator[tuple[Fault, ...]]:
-    """Single faults of one node of each class of alike ones (:mod:`~sm_bt.analysis.symmetry`),
-    then every pair of faults on two nodes."""
-    for node in alike_nodes(model):
+def _fault_sets(model: Model, size: int, classes: dict[str, list[str]]) -> Iterator[tuple[Fault, ...]]:
+    """Single faults of one node of each class of alike ones (``classes``, by their first node:
+    :mod:`~sm_bt.analysis.symmetry`), then every pair of faults on two nodes."""
+    for node in classes:
         for kind in FAULT_KINDS:
             yield (Fault(node, kind),)
     if size > 1:
@@ -143,14 +142,13 @@ def _run(model: Model, system: str, mode: str, faults: tuple[Fault, ...],
         if not manager.requests() and sim.now() - last >= QUIET:
             outcome.settled_after = last - began
             break
+    fired: dict[int, Request] = {}  # the rules' requests, in the order they started
     for event in sim.events:
-        if event.time < began:
-            continue
-        if event.kind is EventKind.RULE:  # "rule NAME: PART is STATE -> TARGET"
-            rule, _, rest = event.text[len("rule "):].partition(":")
-            outcome.rules.append((rule, event.part, rest.rpartition("-> ")[2]))
-        elif event.kind is EventKind.FAILED:
-            outcome.gave_up.append(event.part)
+        request = event.request
+        if event.time >= began and request is not None and request.origin is Origin.RULE and not request.refused:
+            fired.setdefault(request.id, request)
+    outcome.rules = [(request.requester.removeprefix("rule "), request.part, str(request.target))
+                     for request in fired.values()]
     for name, part in model.parts.items():
         if isinstance(part, SystemPart):
             divergence = manager.divergence(name)

@@ -87,12 +87,15 @@ class Hold:
         until = f", until {self.expires:.1f} s" if self.expires is not None else ""
         return f"{self.requester} (priority {self.priority}{until})"
 
+    def lasts(self) -> str:
+        """A rule's hold's condition, as a refusal or an event says it ("" for any other hold)."""
+        return f", while {self.condition[0]} is {self.condition[1]}" if self.condition is not None else ""
+
     def describe(self, now: float, part: str | None = None) -> str:
         """Why a request for ``part`` (default: the held part) is refused."""
         held = self.part if part is None or part == self.part else f"{part} (a part of {self.part})"
-        lasts = f", while {self.condition[0]} is {self.condition[1]}" if self.condition is not None else ""
         return (f"{held} is held in {self.targets.get(part or self.part, self.target)} by {self.requester} "
-                f"(priority {self.priority}) since {now - self.since:.1f} s{lasts}")
+                f"(priority {self.priority}) since {now - self.since:.1f} s{self.lasts()}")
 
     def __str__(self) -> str:
         until = f", lease {self.lease:g} s" if self.lease is not None else ""
@@ -179,8 +182,7 @@ class Holds:
             hold.expires = now + lease
             self._arm(hold)
         log.info("%s: held", hold)
-        lasts = f", while {condition[0]} is {condition[1]}" if condition is not None else ""
-        self.told(hold, f"{part} held in {target} by {hold.holder()}{lasts}")
+        self.told(hold, f"{part} held in {target} by {hold.holder()}{hold.lasts()}")
         return hold
 
     def renew(self, hold: Hold) -> None:

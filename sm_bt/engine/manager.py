@@ -38,9 +38,7 @@ from sm_bt.engine.hierarchy import Hierarchy, implied_targets
 from sm_bt.engine.holds import Hold, Holds
 from sm_bt.engine.inference import Actual, Inference, NodeObservation
 from sm_bt.engine.ledger import Ledger
-from sm_bt.engine.lifecycle import (
-    Transition,
-)
+from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.presence import NodeReports, NodeReturn
 from sm_bt.engine.preview import Configuration, Preview, preview
 from sm_bt.engine.reactions import Reactions

@@ -17,6 +17,22 @@ from sm_bt.analysis import Kind, Level, analyze
 from sm_bt.cli import main
 from sm_bt.model.loader import load_model
 
+#: A node with a slow and a fast mode.
+DRIVE = """\
+drive:
+  ros__parameters:
+    type: node
+    modes:
+      __DEFAULT__:
+        ros__parameters:
+          speed: 1.0
+      FAST:
+        ros__parameters:
+          speed: 2.0
+      SLOW:
+        ros__parameters:
+          speed: 0.5
+"""
 #: A robot: a drive (one node) and a camera, in a system with a normal and a slow mode.
 ROBOT = """\
 robot:
@@ -36,19 +52,7 @@ robot:
         drive: active.SLOW
         camera: active
 #RULES
-drive:
-  ros__parameters:
-    type: node
-    modes:
-      __DEFAULT__:
-        ros__parameters:
-          speed: 1.0
-      FAST:
-        ros__parameters:
-          speed: 2.0
-      SLOW:
-        ros__parameters:
-          speed: 0.5
+""" + DRIVE + """\
 #DRIVE_MODES
 camera:
   ros__parameters:
@@ -103,20 +107,7 @@ right:
         motor: inactive
       SLOW:
         motor: active.SLOW
-motor:
-  ros__parameters:
-    type: node
-    modes:
-      __DEFAULT__:
-        ros__parameters:
-          speed: 1.0
-      FAST:
-        ros__parameters:
-          speed: 2.0
-      SLOW:
-        ros__parameters:
-          speed: 0.5
-"""
+""" + DRIVE.replace("drive:", "motor:")
     path = model_of(tmp_path, flawed)
     found = kinds(path, faults=0)
     assert found[Kind.UNREACHABLE] == [
