@@ -9,7 +9,8 @@ model's own structures), with libyaml's parser underneath. Figures, all measured
   it near 1. It is measured with the garbage collector paused, because CPython's collector alone
   makes building millions of objects grow faster than linearly (CSafeLoader too: about 2x per
   byte from 1,000 to 10,000 nodes), which would hide the loader's own cost; the ratios to PyYAML
-  keep the collector on, as users run them.
+  keep the collector on, as users run them, and each load is timed with one full collection after
+  it (the loader pauses the collector while it builds: :mod:`sm_bt.model.gc_tuning`).
 """
 
 from __future__ import annotations
@@ -40,6 +41,8 @@ def _seconds(action: Callable[[], object], *, collect: bool = True) -> float:
     try:
         start = time.perf_counter()
         action()
+        if collect:  # what the loader made is walked once here (it pauses the collector while it builds)
+            gc.collect()
         return time.perf_counter() - start
     finally:
         if enabled:

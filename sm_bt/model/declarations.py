@@ -7,6 +7,7 @@ the node, system and rule builders read.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass
 
@@ -39,6 +40,13 @@ class PartDecl:
     @property
     def mode_names(self) -> tuple[str, ...]:
         return self.modes.keys if self.modes is not None else ()
+
+    def outline(self) -> PartDecl:
+        """This declaration without the text below its modes' names: what checks of other parts
+        read (kind, default mode, mode names). Once its part is built, the outline is all that is
+        kept, so that a big file's text tree is let go part by part."""
+        modes = None if self.modes is None else YMap(tuple((key, key) for key, _ in self.modes), self.modes.line)
+        return dataclasses.replace(self, params=YMap((), self.params.line), modes=modes, match=None)
 
     def resolve_mode(self, name: str) -> str | None:
         """The mode ``name`` refers to: itself, or the default for ``__DEFAULT__``; None if unknown."""

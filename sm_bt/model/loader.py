@@ -77,6 +77,7 @@ import os
 from sm_bt.model.declarations import PartDecl, read_declarations
 from sm_bt.model.diagnostics import Diagnostics
 from sm_bt.model.errors import ModelError
+from sm_bt.model.gc_tuning import gc_paused
 from sm_bt.model.hierarchy import parts_below, report_cycles
 from sm_bt.model.node_modes import build_node
 from sm_bt.model.rcl_yaml import parse_document
@@ -108,10 +109,13 @@ def load_model(path: str | os.PathLike[str], *, strict: bool = True) -> Model:
 def load_model_text(text: str, filename: str = "<string>", *, strict: bool = True) -> Model:
     """Load a model from its text; ``filename`` is used in the issues' locations."""
     diag = Diagnostics(filename)
-    doc = parse_document(text, diag)
     parts: dict[str, Part] = {}
-    if doc is not None:
-        parts = _build(read_declarations(doc, diag), diag, strict)
+    with gc_paused():
+        doc = parse_document(text, diag)
+        if doc is not None:
+            decls = read_declarations(doc, diag)
+            del doc  # the declarations hold what is needed: _build lets the text tree go as it goes
+            parts = _build(decls, diag, strict)
     diag.raise_if_errors()
     return Model(filename, parts, diag.sorted_warnings())
 
@@ -122,6 +126,7 @@ def _build(decls: dict[str, PartDecl], diag: Diagnostics, strict: bool) -> dict[
         part: Part | None = None
         if decl.kind is PartKind.NODE:
             part = build_node(decl, diag)
+            decls[decl.name] = decl.outline()  # a big file's peak memory: its text and its model at once
         elif decl.kind is PartKind.SYSTEM:
             part = build_system(decl, decls, diag, strict=strict)
         if part is not None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import math
 import re
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -46,6 +47,7 @@ _STRTOD_HEX = re.compile(r"\s*([+-]?)0[xX]((?:[0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9
 _STRTOD_INF = re.compile(r"\s*([+-]?)(?:inf|infinity)", re.IGNORECASE)
 _STRTOD_NAN = re.compile(r"\s*[+-]?nan(?:\([0-9A-Za-z_]*\))?", re.IGNORECASE)
 _STR_TAG = "tag:yaml.org,2002:str"
+_INTERNED_LENGTH = 64
 
 
 def rcl_scalar(text: str, *, quoted: bool = False) -> Scalar:
@@ -371,7 +373,9 @@ class _Builder:
         return True
 
     def scalar(self, event: yaml.ScalarEvent, line: int) -> YScalar | _Skipped:
-        text = event.value
+        # One string per distinct short text: every node repeats its parameters' names and often
+        # their values, which a model of 100,000 nodes would otherwise keep a million copies of.
+        text = sys.intern(event.value) if len(event.value) <= _INTERNED_LENGTH else event.value
         quoted = event.style in ("'", '"') or event.tag == _STR_TAG
         top = self.stack[-1] if self.stack else None
         if top is not None and top.is_map and top.key is None:  # a key: its text, untyped
