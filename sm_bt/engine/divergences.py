@@ -77,11 +77,17 @@ class Divergences:
     def busy(self, nodes: Iterable[str], delta: int) -> None:
         """A request started (``+1``) or ended (``-1``) working on ``nodes``. Either way the grace
         period of each part involved starts again."""
+        counts: dict[str, int] = {}  # each part once, however many of its nodes (the root: all)
+        ancestors = self._hierarchy.ancestors
         for node in nodes:
-            for part in (node, *self._hierarchy.ancestors[node]):
-                self._busy[part] = self._busy.get(part, 0) + delta
-                self._since.pop(part, None)
-                self.touch(part)
+            counts[node] = counts.get(node, 0) + delta
+            for part in ancestors[node]:
+                counts[part] = counts.get(part, 0) + delta
+        busy, since, touch = self._busy, self._since, self.touch
+        for part, count in counts.items():
+            busy[part] = busy.get(part, 0) + count
+            since.pop(part, None)
+            touch(part)
 
     def is_busy(self, part: str) -> bool:
         return self._busy.get(part, 0) > 0

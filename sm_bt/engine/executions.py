@@ -107,6 +107,12 @@ class Execution:
         for step in self.steps:
             step.release()
 
+    def dismantle(self) -> None:
+        """Over for good (no rollback will read its plan): its plan lets go of it (no cycles left)."""
+        self.root.dismantle()
+        self.steps = []
+        self.timer = None
+
     # -- what it is doing -----------------------------------------------------------------------
 
     def _running(self) -> list[NodeJob]:
@@ -328,8 +334,11 @@ class Executions:
             self._end(execution.request, succeeded, reason)
             failed = execution.rolls_back
             self._end(failed.request, False, self._rolled_back(failed, succeeded, reason))
+            failed.dismantle()
+            execution.dismantle()
             return
         self._end(execution.request, succeeded, reason)
+        execution.dismantle()
 
     def fail(self, execution: Execution, reason: str) -> None:
         """``execution``'s request failed by itself (a step, its timeout): what its failure policy

@@ -49,6 +49,7 @@ from sm_bt.engine.serialiser import Serialiser
 from sm_bt.engine.settling import Settling
 from sm_bt.engine.snapshots import PartSnapshot
 from sm_bt.model.errors import RequestError
+from sm_bt.model.gc_tuning import gc_paused
 from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, Model, NodePart
 
@@ -81,33 +82,34 @@ class ModeManager:
                  grace_period: float = 2.0, recovery_attempts: int = 3, recovery_window: float = 60.0,
                  rules: bool = True, recovery: bool = True, on_failure: str = "stay",
                  priorities: Mapping[str, int] | None = None) -> None:
-        self.model = model
-        self.backend = backend
-        self.clock = backend.clock
-        self._serial = Serialiser()
-        self._lock = self._serial.lock
-        self._hierarchy = Hierarchy.of(model)
-        self._inference = Inference(model, self._hierarchy)
-        self._divergences = Divergences(model, self._hierarchy, self._inference, grace_period)
-        self._reactions = Reactions(model, self._hierarchy, attempts=recovery_attempts, window=recovery_window,
-                                    rules=rules, recovery=recovery)
-        self._ledger = Ledger(model, self._inference, self._divergences, self._serial.outbox, self.clock)
-        io = BackendIO(self._inference, self.clock, backend, self._serial)
-        self._drivers = {node.name: NodeDriver(node.name, io) for node in model.nodes}
-        self._responses = Responses(self._ledger, self._divergences, self._reactions, self._serial, self.clock)
-        renew = self._responses.renew_budgets
-        self._executions = Executions(self._ledger, self._divergences, self._reactions, self._drivers, self._serial,
-                                      self.clock, request_timeout=request_timeout, renew_budgets=renew,
-                                      on_failure=on_failure)
-        self._executions.holds = Holds(self.clock, priorities, locked=self._entered,
-                                       told=lambda hold, text: self._ledger.emit(EventKind.HOLD, hold.part, text))
-        self._executions.holds.ended = self._executions.waiting.hold_ended
-        self._reports = NodeReports(self._ledger, self._divergences, self._executions, self._hierarchy,
-                                    self._drivers, self._serial, self.clock, renew_budgets=renew)
-        self._serial.work = Settling(self._serial, self._divergences, self._responses, self._executions, self.clock,
-                                     self._inference.actual)
-        with self._serial:
-            backend.attach([node.name for node in model.nodes], self._reports)
+        with gc_paused():  # a manager of 100,000 nodes is millions of objects (sm_bt.model.gc_tuning)
+            self.model = model
+            self.backend = backend
+            self.clock = backend.clock
+            self._serial = Serialiser()
+            self._lock = self._serial.lock
+            self._hierarchy = Hierarchy.of(model)
+            self._inference = Inference(model, self._hierarchy)
+            self._divergences = Divergences(model, self._hierarchy, self._inference, grace_period)
+            self._reactions = Reactions(model, self._hierarchy, attempts=recovery_attempts, window=recovery_window,
+                                        rules=rules, recovery=recovery)
+            self._ledger = Ledger(model, self._inference, self._divergences, self._serial.outbox, self.clock)
+            io = BackendIO(self._inference, self.clock, backend, self._serial)
+            self._drivers = {node.name: NodeDriver(node.name, io) for node in model.nodes}
+            self._responses = Responses(self._ledger, self._divergences, self._reactions, self._serial, self.clock)
+            renew = self._responses.renew_budgets
+            self._executions = Executions(self._ledger, self._divergences, self._reactions, self._drivers, self._serial,
+                                          self.clock, request_timeout=request_timeout, renew_budgets=renew,
+                                          on_failure=on_failure)
+            self._executions.holds = Holds(self.clock, priorities, locked=self._entered,
+                                           told=lambda hold, text: self._ledger.emit(EventKind.HOLD, hold.part, text))
+            self._executions.holds.ended = self._executions.waiting.hold_ended
+            self._reports = NodeReports(self._ledger, self._divergences, self._executions, self._hierarchy,
+                                        self._drivers, self._serial, self.clock, renew_budgets=renew)
+            self._serial.work = Settling(self._serial, self._divergences, self._responses, self._executions, self.clock,
+                                         self._inference.actual)
+            with self._serial:
+                backend.attach([node.name for node in model.nodes], self._reports)
 
     @property
     def request_timeout(self) -> float:

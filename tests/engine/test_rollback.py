@@ -172,3 +172,28 @@ def check_failure_policy(model: Model, start: dict[str, Any], part: str, mode: s
 def test_a_failed_request_is_rolled_back_or_says_what_it_left(
         change: tuple[Model, dict[str, Any], str, str, tuple[str, str, str], str]) -> None:
     check_failure_policy(*change)
+
+
+def test_finished_requests_leave_no_garbage_cycles_behind_them() -> None:
+    """A request's plan is a tree whose jobs point up to their parents and to the execution: left
+    as it was, every request left a cycle per node for the garbage collector to find, some time
+    later (70 MB at 100,000 nodes). Once over, it is taken apart: reference counting frees it."""
+    import gc
+
+    system = SimulatedSystem(twenty_nodes(), rules=False, recovery=False, history=False, record=False)
+    system.finish(system.manager.change_state("robot", "configure"))
+    gc.collect()
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        system.finish(system.manager.change_mode("robot", "FAST"))  # succeeds
+        system.fail_next("n02", Transition.ACTIVATE)
+        system.finish(system.manager.change_mode("robot", "__DEFAULT__", on_failure="rollback"))  # rolled back
+        first = system.manager.change_mode("robot", "FAST")
+        system.finish(system.manager.change_mode("robot", "__DEFAULT__"))  # preempts the first
+        assert first.done and not first.succeeded
+        del first
+        assert gc.collect() == 0
+    finally:
+        if enabled:
+            gc.enable()
