@@ -213,14 +213,16 @@ class SimBackend:
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
         call = _PendingCall(node, transition.label, done)
-        self._record(node, SimEventKind.REQUEST, f"change_state {transition.label} ({int(transition)})")
+        if self._history:  # the text only for a kept history: a bring-up of 100,000 nodes makes 400,000
+            self._record(node, SimEventKind.REQUEST, f"change_state {transition.label} ({int(transition)})")
         if self._accept(call):
             self._after(node, 0.0, functools.partial(self._deliver_transition, call, transition))
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         values = dict(parameters)
         call = _PendingCall(node, "set_parameters", done)
-        self._record(node, SimEventKind.REQUEST, f"set_parameters {format_values(values)}", parameters=values)
+        if self._history:
+            self._record(node, SimEventKind.REQUEST, f"set_parameters {format_values(values)}", parameters=values)
         if self._accept(call):
             self._after(node, self.parameter_delay, lambda: self._deliver_parameters(call, values))
 
@@ -419,8 +421,9 @@ class SimBackend:
         pending = self._pending.get(call.node, [])
         if call in pending:
             pending.remove(call)
-        outcome = "ok" if result.ok else f"failed: {result.reason}"
-        self._record(call.node, SimEventKind.RESPONSE, f"{call.label}: {outcome}")
+        if self._history:
+            outcome = "ok" if result.ok else f"failed: {result.reason}"
+            self._record(call.node, SimEventKind.RESPONSE, f"{call.label}: {outcome}")
         call.done(result)
 
     # -- process life -------------------------------------------------------------------------------
@@ -472,11 +475,13 @@ class SimBackend:
         self._reports.appeared(node, NodeReport(sim.state, sim.parameters, lifecycle=sim.lifecycle))
 
     def _moved(self, node: str, event: TransitionEvent) -> None:
-        self._record(node, SimEventKind.TRANSITION, str(event), transition=event)
+        if self._history:
+            self._record(node, SimEventKind.TRANSITION, str(event), transition=event)
         self._reports.state(node, event.goal)
 
     def _parameters_changed(self, node: str, values: Mapping[str, ParamValue]) -> None:
-        self._record(node, SimEventKind.PARAMETERS, format_values(values), parameters=dict(values))
+        if self._history:
+            self._record(node, SimEventKind.PARAMETERS, format_values(values), parameters=dict(values))
         self._reports.parameters(node, values)
 
     def _record(self, node: str, kind: SimEventKind, details: str, *, transition: TransitionEvent | None = None,
