@@ -1,0 +1,143 @@
+"""Scale at plant size: 100,000 simulated nodes (the generated model, systems of 10, nested).
+
+Each figure comes from a fresh interpreter (``python -m bench.large N PART``), so that its resident
+set is this model's alone. CPU time (``process_time``) of each step, as ``sm-bt manager`` runs:
+
+* load: :func:`~sm_bt.model.loader.load_model_text` and then one full collection (what the process
+  pays for the objects it made), against ``yaml.load(text, CSafeLoader)`` and its collection, in a
+  process of its own;
+* construction: the manager over the loaded (and frozen) model and its simulated nodes (the nodes
+  themselves made before), with every node's first report, then
+  :func:`~sm_bt.model.gc_tuning.freeze_long_lived` (as ``sm-bt manager`` does once it is built);
+* bring-up: one ``change_mode`` from unconfigured to active, until done; a whole-system mode
+  change; each with the simulated nodes' own work included (they run in this process, no delays);
+* admission: a request's check against 100 holds;
+* resident memory: the process's peak (``ru_maxrss``), the model text included.
+"""
+
+from __future__ import annotations
+
+import gc
+import json
+import resource
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from bench.figures import Figure
+
+SIZE, QUICK_SIZE = 100_000, 2_000
+LOAD_GOAL = 1.5  # over CSafeLoader
+CONSTRUCTION_GOAL, BRING_UP_GOAL, CHANGE_GOAL = 5.0, 20.0, 10.0  # s of CPU
+ADMISSION_GOAL_MS = 1.0
+RSS_GOAL_MB = 1536.0  # 1.5 GB = 1.5 x 2^30 bytes
+_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _cpu(action: Callable[[], object]) -> float:
+    start = time.process_time()
+    action()
+    return time.process_time() - start
+
+
+def _peak_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def child_baseline(nodes: int) -> dict[str, float]:
+    import yaml
+
+    from bench.generated import model_text
+
+    text = model_text(nodes)
+
+    def load() -> None:
+        yaml.load(text, yaml.CSafeLoader)  # nothing kept: its garbage is collected below
+        gc.collect()
+
+    return {"csafeloader": _cpu(load)}
+
+
+def child_manager(nodes: int) -> dict[str, float]:
+    from bench.generated import ROOT, model_text
+    from bench.scale import admission
+    from sm_bt.model.gc_tuning import freeze_long_lived
+    from sm_bt.model.loader import load_model_text
+    from sm_bt.model.states import State
+    from sm_bt.sim import SimBackend, SimulatedSystem
+
+    holder: dict[str, Any] = {"text": model_text(nodes)}
+    out: dict[str, float] = {"bytes": len(holder["text"])}
+
+    def load() -> None:
+        holder["model"] = load_model_text(holder.pop("text"), "generated.yaml")
+        gc.collect()
+
+    out["load"] = _cpu(load)
+    model = holder.pop("model")
+    gc.freeze()  # as sm-bt manager keeps it: the construction's collection below walks its own objects
+
+    backend = SimBackend(model, transition_delay=0.0, error_delay=0.0, parameter_delay=0.0,
+                         initial_state=State.UNCONFIGURED, history=False)  # the nodes, not the manager
+
+    def build() -> None:
+        holder["system"] = SimulatedSystem(model, backend=backend, record=False)
+        freeze_long_lived()
+
+    out["construction"] = _cpu(build)
+    system = holder.pop("system")
+    manager, clock = system.manager, system.backend.clock
+
+    def drive(target: str) -> None:
+        request = manager.change_mode(ROOT, target)
+        for _ in range(100):
+            if request.done:
+                break
+            clock.advance(1.0)
+        if not request.succeeded:
+            raise RuntimeError(f"{request.description} did not succeed: {request.reason}")
+
+    out["bring_up"] = _cpu(lambda: drive("__DEFAULT__"))
+    out["change"] = _cpu(lambda: drive("FAST"))
+    out["admission"] = admission(manager, clock)
+    out["peak_mb"] = _peak_mb()
+    return out
+
+
+def _child(nodes: int, part: str) -> dict[str, float]:
+    done = subprocess.run([sys.executable, "-m", "bench.large", str(nodes), part], cwd=_ROOT, capture_output=True,
+                          text=True, timeout=900, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"{part} child for N={nodes} failed: {done.stderr.strip().splitlines()[-1:]}")
+    result: dict[str, float] = json.loads(done.stdout)
+    return result
+
+
+def run(quick: bool) -> list[Figure]:
+    nodes = QUICK_SIZE if quick else SIZE
+    ours = _child(nodes, "manager")
+    libyaml = _child(nodes, "baseline")["csafeloader"]
+    common: dict[str, Any] = {"N": nodes, "cpu": "process_time", "gc": "frozen once built (as sm-bt manager)"}
+    goal = (lambda value: value) if not quick else (lambda value: None)
+    return [
+        Figure("scale", f"model loading / yaml CSafeLoader, N={nodes}", ours["load"] / libyaml, "x", goal(LOAD_GOAL),
+               details={**common, "load_s": round(ours["load"], 2), "csafeloader_s": round(libyaml, 2),
+                        "bytes": ours["bytes"], "how": "each with one full collection after"}),
+        Figure("scale", f"ModeManager construction, ready to run, N={nodes}", ours["construction"], "s",
+               goal(CONSTRUCTION_GOAL), details={**common, "includes": "first reports, freeze_long_lived()"}),
+        Figure("scale", f"bring-up, one change_mode, N={nodes}", ours["bring_up"], "s", goal(BRING_UP_GOAL),
+               details=common),
+        Figure("scale", f"whole-system mode change, N={nodes}", ours["change"], "s", goal(CHANGE_GOAL), details=common),
+        Figure("holds", f"admission check of a request, 100 holds, N={nodes}", ours["admission"] * 1e3, "ms",
+               goal(ADMISSION_GOAL_MS), details=common),
+        Figure("P5", f"peak resident memory, N={nodes}", ours["peak_mb"], "MB", goal(RSS_GOAL_MB),
+               details={**common, "what": "ru_maxrss of the process: text, load, manager, bring-up, change"}),
+    ]
+
+
+if __name__ == "__main__":
+    count, which = int(sys.argv[1]), sys.argv[2]
+    print(json.dumps(child_manager(count) if which == "manager" else child_baseline(count)))
