@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import enum
 import itertools
+import threading
 from collections.abc import Callable
 
 from sm_bt.model.states import StateMode
@@ -59,6 +60,9 @@ class Request:
         self._withdraw = withdraw
         self._progress: Callable[[], str] | None = None  # the step in progress, while running
         self._callbacks: list[Callable[[Request], None]] = []
+        # A callback added from another thread (an application's, while the manager's executor
+        # finishes the request) must be called once: added before the end, or at once after it.
+        self._ending = threading.Lock()
 
     def cancel(self) -> None:
         """Withdraw the request: no further steps are sent, and the parts' previous targets are
@@ -67,11 +71,12 @@ class Request:
             self._withdraw(self)
 
     def add_done_callback(self, callback: Callable[[Request], None]) -> None:
-        """Call ``callback(request)`` when done (at once if it already is)."""
-        if self.done:
-            callback(self)
-        else:
-            self._callbacks.append(callback)
+        """Call ``callback(request)`` when done (at once if it already is), from any thread."""
+        with self._ending:
+            if not self.done:
+                self._callbacks.append(callback)
+                return
+        callback(self)
 
     @property
     def feedback(self) -> str:
@@ -85,11 +90,12 @@ class Request:
         return None if self.finished is None else self.finished - self.created
 
     def _finish(self, succeeded: bool, reason: str, now: float) -> None:
-        if self.done:
-            return
-        self.done, self.succeeded, self.reason, self.finished = True, succeeded, reason, now
-        self._progress = None
-        callbacks, self._callbacks = self._callbacks, []
+        with self._ending:
+            if self.done:
+                return
+            self.done, self.succeeded, self.reason, self.finished = True, succeeded, reason, now
+            self._progress = None
+            callbacks, self._callbacks = self._callbacks, []
         for callback in callbacks:
             callback(self)
 

@@ -11,6 +11,8 @@ says which engine it was found on:
 
 from __future__ import annotations
 
+import time
+
 from scenario import (
     Cancel,
     ChangeMode,
@@ -869,3 +871,28 @@ def test_two_restarts_at_one_instant_renew_the_budget_twice() -> None:
         final=ChangeMode(part="s0", mode="__DEFAULT__"),
         final_delay=0.1,
     ))
+
+
+def test_a_done_callback_added_while_another_thread_ends_the_request_is_called_once() -> None:
+    """An application adds a callback while the manager's executor finishes the request: it was
+    checked as not done, then appended to the list the end had already taken (never called)."""
+    import threading
+
+    from sm_bt.engine.requests import Origin, Request
+    from sm_bt.model.states import State, StateMode
+
+    request = Request("robot", StateMode(State.ACTIVE, "FAST"), "change_mode robot FAST", Origin.USER, 0.0)
+    in_append, calls = threading.Event(), []
+
+    class SlowList(list):  # type: ignore[type-arg]
+        def append(self, item: object) -> None:
+            in_append.set()
+            time.sleep(0.05)  # the other thread ends the request meanwhile, if it can
+            super().append(item)
+
+    request._callbacks = SlowList()
+    ender = threading.Thread(target=lambda: (in_append.wait(5), request._finish(True, "", 1.0)))
+    ender.start()
+    request.add_done_callback(calls.append)
+    ender.join(5)
+    assert request.done and calls == [request]
