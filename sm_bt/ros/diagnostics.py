@@ -189,7 +189,8 @@ class DiagnosticsPublisher:
 
     def _changed(self, part: str, now: bool = False) -> None:
         with self._lock:
-            if self._closed or part not in self._manager.model.parts:
+            # Nobody reads it: nothing to gather (a reader that comes gets every part within `period`).
+            if self._closed or part not in self._manager.model.parts or not self._publisher.get_subscription_count():
                 return
             self._dirty.add(part)
             if now and self._flush is not None:
