@@ -17,7 +17,7 @@ from bench.figures import Figure
 from bench.report import plot, table, write_json
 
 #: In the order they run: the cheap, deterministic ones first, the real-ROS one last.
-MODULES = ("scale", "memory", "model_load", "tick", "analysis", "ros", "cli")
+MODULES = ("scale", "memory", "model_load", "large", "tick", "analysis", "ros", "ros_app", "cli")
 
 
 def _one_line(error: BaseException) -> str:

@@ -12,6 +12,8 @@ set is this model's alone. CPU time (``process_time``) of each step, as ``sm-bt 
 * bring-up: one ``change_mode`` from unconfigured to active, until done; a whole-system mode
   change; each with the simulated nodes' own work included (they run in this process, no delays);
 * admission: a request's check against 100 holds;
+* a fault as the simulated backend reports it (a node leaves its mode and comes back, flipping
+  every system above it), the manager's handling included; and its growth from 1,000 nodes;
 * resident memory: the process's peak (``ru_maxrss``), the model text included.
 """
 
@@ -20,10 +22,11 @@ from __future__ import annotations
 import gc
 import json
 import resource
+import statistics
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +37,9 @@ LOAD_GOAL = 1.5  # over CSafeLoader
 CONSTRUCTION_GOAL, BRING_UP_GOAL, CHANGE_GOAL = 5.0, 20.0, 10.0  # s of CPU
 ADMISSION_GOAL_MS = 1.0
 RSS_GOAL_MB = 1536.0  # 1.5 GB = 1.5 x 2^30 bytes
+#: A fault, the simulated backend's report included (µs), and its growth from 1,000 nodes.
+FAULT_GOAL_US, FAULT_GROWTH_GOAL = 50.0, 1.3
+FAULT_EVENTS, GROWTH_SIZE = 2000, 1000
 _ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -62,7 +68,7 @@ def child_baseline(nodes: int) -> dict[str, float]:
 
 
 def child_manager(nodes: int) -> dict[str, float]:
-    from bench.generated import ROOT, model_text
+    from bench.generated import ROOT, model_text, shape
     from bench.scale import admission
     from sm_bt.model.gc_tuning import freeze_long_lived
     from sm_bt.model.loader import load_model_text
@@ -102,9 +108,24 @@ def child_manager(nodes: int) -> dict[str, float]:
 
     out["bring_up"] = _cpu(lambda: drive("__DEFAULT__"))
     out["change"] = _cpu(lambda: drive("FAST"))
+    out["fault"] = fault_event(system.backend, shape(nodes)[0].nodes)
     out["admission"] = admission(manager, clock)
     out["peak_mb"] = _peak_mb()
     return out
+
+
+def fault_event(backend: Any, nodes: Sequence[str], count: int = FAULT_EVENTS) -> float:
+    """The median wall time of a fault as the simulated backend reports it: a node in the middle
+    of the model leaves its mode (a parameter changed from outside) and comes back, ``count``
+    times; each flips the node and every system above it, and the manager's handling is included."""
+    node = nodes[len(nodes) // 2]
+    settled = backend.node(node).parameters["speed"]
+    times = []
+    for index in range(count):
+        start = time.perf_counter()
+        backend.set_parameter(node, "speed", 99.0 if index % 2 == 0 else settled)
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
 
 
 def _child(nodes: int, part: str) -> dict[str, float]:
@@ -119,6 +140,7 @@ def _child(nodes: int, part: str) -> dict[str, float]:
 def run(quick: bool) -> list[Figure]:
     nodes = QUICK_SIZE if quick else SIZE
     ours = _child(nodes, "manager")
+    small = _child(GROWTH_SIZE if not quick else 100, "manager")
     libyaml = _child(nodes, "baseline")["csafeloader"]
     common: dict[str, Any] = {"N": nodes, "cpu": "process_time", "gc": "frozen once built (as sm-bt manager)"}
     goal = (lambda value: value) if not quick else (lambda value: None)
@@ -133,6 +155,11 @@ def run(quick: bool) -> list[Figure]:
         Figure("scale", f"whole-system mode change, N={nodes}", ours["change"], "s", goal(CHANGE_GOAL), details=common),
         Figure("holds", f"admission check of a request, 100 holds, N={nodes}", ours["admission"] * 1e3, "ms",
                goal(ADMISSION_GOAL_MS), details=common),
+        Figure("P3", f"fault event with the simulated backend's report, median, N={nodes}", ours["fault"] * 1e6, "µs",
+               goal(FAULT_GOAL_US), details={**common, "events": FAULT_EVENTS, "clock": "perf_counter"}),
+        Figure("P3", f"fault event growth, N={nodes} / N={GROWTH_SIZE if not quick else 100}",
+               ours["fault"] / small["fault"], "x", goal(FAULT_GROWTH_GOAL),
+               details={"small_us": round(small["fault"] * 1e6, 1), "large_us": round(ours["fault"] * 1e6, 1)}),
         Figure("P5", f"peak resident memory, N={nodes}", ours["peak_mb"], "MB", goal(RSS_GOAL_MB),
                details={**common, "what": "ru_maxrss of the process: text, load, manager, bring-up, change"}),
     ]
