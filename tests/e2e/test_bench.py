@@ -24,7 +24,7 @@ def bench(out: Path, only: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_quick_run_prints_the_table_and_writes_json_and_plot(tmp_path: Path) -> None:
-    done = bench(tmp_path, "scale,memory,model_load,tick")
+    done = bench(tmp_path, "scale,memory,model_load,large,tick")
     assert done.returncode in (0, 1), done.stderr[-2000:]
     assert "Traceback" not in done.stderr
     header, rule, *rows = done.stdout.strip().splitlines()
@@ -32,6 +32,7 @@ def test_quick_run_prints_the_table_and_writes_json_and_plot(tmp_path: Path) -> 
     groups = {row.split("|")[1].strip() for row in rows}
     assert {"scale", "P3", "P5", "P4"} <= groups
     assert any("whole-system mode change, N=250" in row for row in rows)
+    assert any("peak resident memory, N=2000" in row for row in rows)  # large, at its quick size
 
     record = json.loads((tmp_path / "results.json").read_text())
     assert record["quick"] is True and record["failed_modules"] == []
