@@ -22,7 +22,7 @@ MOVING_TO = {
     State.UNCONFIGURED: State.CLEANINGUP,
     State.FINALIZED: State.SHUTTINGDOWN,
 }
-_REASONS_KEPT = 32  # per system
+_REASONS_KEPT = 4  # per system: a part flapping between two values, towards one of two modes
 _GOING_DOWN = (State.ACTIVE, State.ACTIVATING, State.DEACTIVATING)
 
 
