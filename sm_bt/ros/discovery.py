@@ -78,9 +78,12 @@ class Discovery:
             graph = now - self._graph_checked >= self.graph_interval
             if graph:
                 self._graph_checked = now
+        # One graph query for all present nodes: `service_is_ready` walks the whole graph cache (about
+        # 0.45 ms a call with 200 nodes on the graph), and two a node a look cost 18 % of a core idle.
+        on_graph = self.graph_nodes() if graph else None
         for peer in peers:
             try:
-                self._look_at(peer, now, peer in probed, graph)
+                self._look_at(peer, now, peer in probed, on_graph)
             except Exception:  # one node's trouble must not stop the others being watched
                 log.exception("watching %s failed", peer.fqn)
         with self._lock:
@@ -89,11 +92,24 @@ class Discovery:
                 self._timer = self._clock.call_later(
                     self.idle_poll_interval if settled else self.poll_interval, self._poll)
 
-    def _look_at(self, peer: Peer, now: float, probed: bool, graph: bool) -> None:
-        """``graph``: also ask whether a present node's services are still there."""
+    def graph_nodes(self) -> set[str]:
+        """The fully qualified names of the nodes on the ROS graph now."""
+        return {namespace.rstrip("/") + "/" + name for name, namespace in self._node.get_node_names_and_namespaces()}
+
+    def _look_at(self, peer: Peer, now: float, probed: bool, on_graph: set[str] | None) -> None:
+        """``on_graph`` (the nodes on the graph): also check that a present node is still there; a
+        node that leaves the graph cleanly leaves that list with its services."""
         present = peer.presence is Presence.PRESENT
-        lifecycle_ready = peer.get_state.service_is_ready() if graph or not present else True
-        parameters_ready = peer.get_parameters.service_is_ready() if graph or not present else True
+        graph = on_graph is not None
+        relisted = False
+        if present:
+            lifecycle_ready = parameters_ready = on_graph is None or peer.fqn in on_graph
+            # Taken for a node without lifecycle services, which showed up later (under load, more
+            # than plain_after after its parameter services): take it on again, as a lifecycle node.
+            relisted = graph and lifecycle_ready and not peer.lifecycle and peer.get_state.service_is_ready()
+        else:
+            lifecycle_ready = peer.get_state.service_is_ready()
+            parameters_ready = peer.get_parameters.service_is_ready()
         # A lifecycle node is taken on once its transition events reach us too: a long transition
         # of ours is told from a cut by its events (see ``Peer.working``), and an event sent
         # before its writer matched our reader is lost. A node whose events never come is taken
@@ -103,6 +119,7 @@ class Discovery:
             participant = self.participant_of(peer)
             with self._lock:
                 peer.participant = participant
+                self._liveness.joined(peer)
         with self._lock:
             presence = peer.presence
             if presence is Presence.PRESENT:
@@ -123,6 +140,8 @@ class Discovery:
         if presence is Presence.PRESENT:
             if gone:
                 self._vanish((peer, f"node {peer.fqn} left the ROS graph"))
+            elif relisted:
+                self._acquire(peer, lifecycle=True)
             elif silent:
                 self._liveness.silence_verdict(peer)
             elif probe_due:
@@ -160,6 +179,7 @@ class Discovery:
                 peer.presence, peer.lifecycle, peer.state, peer.gone = Presence.PRESENT, lifecycle, state, ""
                 peer.last_heard = peer.last_probe = self._clock.now()
                 peer.participant = self.participant_of(peer)
+                self._liveness.joined(peer)
                 later = dict(peer.buffered_parameters)
             # DEBUG: the manager logs the node appearing (one line per event at INFO).
             log.debug("node %s appeared: %s%s", peer.fqn, state.label, "" if lifecycle else " (parameters only)")
