@@ -18,6 +18,8 @@ from bench.report import plot, table, write_json
 
 #: In the order they run: the cheap, deterministic ones first, the real-ROS one last.
 MODULES = ("scale", "memory", "model_load", "large", "tick", "analysis", "ros", "ros_app", "cli")
+#: Run only when named (``--only``): 200 real nodes in ten processes take 3-4 minutes on their own.
+OPTIONAL = ("ros_plant",)
 
 
 def _one_line(error: BaseException) -> str:
@@ -31,8 +33,8 @@ class ModuleFailed(RuntimeError):
 
 def _run_module(name: str, quick: bool) -> list[Figure]:
     """Run ``bench.<name>`` in a fresh interpreter (see :mod:`bench.one`)."""
-    if name not in MODULES:
-        raise LookupError(f"no benchmark module {name!r} (modules: {', '.join(MODULES)})")
+    if name not in MODULES + OPTIONAL:
+        raise LookupError(f"no benchmark module {name!r} (modules: {', '.join(MODULES + OPTIONAL)})")
     command = [sys.executable, "-m", "bench.one", name, *(["--quick"] if quick else [])]
     done = subprocess.run(command, cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True,
                           timeout=1800, check=False)
@@ -50,7 +52,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, a few seconds per module (smoke test)")
     parser.add_argument("--only", default="", metavar="NAMES",
-                        help=f"comma-separated modules to run (default: all of {', '.join(MODULES)})")
+                        help=f"comma-separated modules to run (default: all of {', '.join(MODULES)}; "
+                        f"also {', '.join(OPTIONAL)})")
     parser.add_argument("--out", type=Path, default=Path("build/bench"), help="where results.json and "
                         "scaling.png go (default: build/bench)")
     args = parser.parse_args(argv)
