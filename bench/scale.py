@@ -89,7 +89,7 @@ class _TimedListener:
         self._timed(lambda: self._listener.node_vanished(node, reason))
 
 
-class _Rig:
+class Rig:
     """A manager over simulated nodes that all start ``state``, its construction timed."""
 
     def __init__(self, model: Model, state: State) -> None:
@@ -137,7 +137,7 @@ def _cpu(work: Callable[[], object]) -> float:
     return time.process_time() - start
 
 
-def _fault_events(rig: _Rig, count: int) -> list[float]:
+def fault_events(rig: Rig, count: int) -> list[float]:
     """Flip one node in the middle of the model out of its mode and back, ``count`` times."""
     nodes = shape(len(rig.manager.model.nodes))[0].nodes
     index = len(nodes) // 2
@@ -151,7 +151,7 @@ def _fault_events(rig: _Rig, count: int) -> list[float]:
     return list(rig.listener.times)
 
 
-def _full_inference(rig: _Rig) -> float:
+def _full_inference(rig: Rig) -> float:
     manager = rig.manager
     observations = {node.name: manager.observation(node.name) for node in manager.model.nodes}
     targets = {part: target for part in manager.model.parts if (target := manager.target(part)) is not None}
@@ -163,9 +163,9 @@ def _full_inference(rig: _Rig) -> float:
     return statistics.median(times)
 
 
-def _from_active(loaded: Model, fault_events: int) -> dict[str, Any]:
+def _from_active(loaded: Model, faults: int) -> dict[str, Any]:
     """Construction, the mode change, and the node events (of three mode changes, and faults)."""
-    rig = _Rig(loaded, State.ACTIVE)
+    rig = Rig(loaded, State.ACTIVE)
     listener = rig.listener
     assert listener is not None
     out: dict[str, Any] = {"construction": rig.construction}
@@ -178,7 +178,7 @@ def _from_active(loaded: Model, fault_events: int) -> dict[str, Any]:
         rig.drive(rig.manager.change_mode(ROOT, "FAST"))
         listener.on = False
         out["change_events"] = list(listener.times)
-        out["fault_events"] = _fault_events(rig, fault_events)
+        out["fault_events"] = fault_events(rig, faults)
         out["full_inference"] = _full_inference(rig)
     return out
 
@@ -208,7 +208,7 @@ def admission(manager: ModeManager, clock: VirtualClock, holds: int = 100, sampl
 
 
 def _bring_up(loaded: Model, *, one_request: bool) -> float:
-    rig = _Rig(loaded, State.UNCONFIGURED)
+    rig = Rig(loaded, State.UNCONFIGURED)
 
     def requests() -> None:
         if one_request:
@@ -224,7 +224,7 @@ def _bring_up(loaded: Model, *, one_request: bool) -> float:
 def _paired_event_medians(small: int, large: int, rounds: int) -> tuple[float, float]:
     """Median node-event times (s) at two sizes, from mode changes of both managers taking turns,
     so that a slow spell of the machine falls on both sizes rather than on one of them."""
-    rigs = [_Rig(model(nodes), State.ACTIVE) for nodes in (small, large)]
+    rigs = [Rig(model(nodes), State.ACTIVE) for nodes in (small, large)]
     times: list[list[float]] = [[], []]
     with _frozen():
         for round_ in range(rounds):
@@ -239,10 +239,10 @@ def _paired_event_medians(small: int, large: int, rounds: int) -> tuple[float, f
     return statistics.median(times[0]), statistics.median(times[1])
 
 
-def measure(nodes: int, fault_events: int) -> dict[str, Any]:
+def measure(nodes: int, faults: int) -> dict[str, Any]:
     """Every scale and P3 figure for one N (seconds)."""
     loaded = model(nodes)
-    out = _from_active(loaded, fault_events)
+    out = _from_active(loaded, faults)
     out["bring_up_one"] = _bring_up(loaded, one_request=True)
     out["bring_up_two"] = _bring_up(loaded, one_request=False)
     return out
@@ -282,7 +282,7 @@ def run(quick: bool) -> list[Figure]:
                                       FULL_OVER_EVENT_GOAL if nodes == 10_000 else None, op=">=",
                                       details={"full_us": round(full, 1)}))
     if not quick:
-        rig = _Rig(model(sizes[-1]), State.ACTIVE)
+        rig = Rig(model(sizes[-1]), State.ACTIVE)
         admission_s = admission(rig.manager, rig.backend.clock)
         figures.append(Figure("holds", f"admission check of a request, 100 holds, N={sizes[-1]}", admission_s * 1e6,
                               "µs", ADMISSION_GOAL_US, details={"holds": 100, "samples": 2000}))
