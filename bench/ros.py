@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.figures import Figure
-from bench.ros_baseline import SYSTEM, TIMEOUT, BaselineProcess, freeze_garbage, node_values, wait_for
+from bench.ros_baseline import SYSTEM, TIMEOUT, BaselineProcess, freeze_garbage, mode_values, wait_for
 from sm_bt.engine.events import EventKind
 from sm_bt.engine.manager import ModeManager
 from sm_bt.model.states import State
@@ -117,7 +117,7 @@ def run(quick: bool) -> list[Figure]:
         path.write_text(model_text(count))
         model = load_model(path)
         names = [f"bench_n{i}" for i in range(count)]
-        values = {mode: {n: node_values(model, n, mode) for n in names} for mode in ("__DEFAULT__", "FAST")}
+        values = mode_values(model, names)
         process = NodesProcess(str(path), "--state", "unconfigured").start()
         baseline: BaselineProcess | None = None
         runtime: Any = None
@@ -182,36 +182,63 @@ def _rollback(runtime: Any, manager: ModeManager, names: list[str], turns: int) 
                                            "turns": turns})]
 
 
-def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, dict[str, dict[str, Any]]],
-           bring_ups: int, switches: int, count: int) -> list[Figure]:
-    times: dict[str, list[float]] = {key: [] for key in ("switch", "switch_baseline", "two", "one", "bring_baseline")}
-    delays: list[float] = []
+class Turns:
+    """The steps of the manager's and the baseline's turns over the same nodes, and their times
+    (seconds, by kind: ``switch``, ``switch_baseline``, ``two``, ``one``, ``bring_baseline``) and P2
+    delays. A baseline step leaves the nodes where the manager has seen them (untimed)."""
 
-    def seen(state: State) -> None:
+    def __init__(self, baseline: BaselineProcess, manager: ModeManager,
+                 values: dict[str, dict[str, dict[str, Any]]], count: int) -> None:
+        self.baseline, self.manager, self.values, self.count = baseline, manager, values, count
+        self.times: dict[str, list[float]] = {key: [] for key in ("switch", "switch_baseline", "two", "one",
+                                                                  "bring_baseline")}
+        self.delays: list[float] = []
+
+    def seen(self, state: State) -> None:
         """Untimed: the baseline moved the nodes behind the manager's back; let it see where they are."""
-        wait_for(lambda: all(manager.observation(n).state is state for n in baseline.nodes),
+        wait_for(lambda: all(self.manager.observation(n).state is state for n in self.baseline.nodes),
                  f"manager sees {state.label}")
 
-    def baseline_reset() -> None:  # every node unconfigured, with the __DEFAULT__ values (untimed)
-        baseline.transition("deactivate")
-        baseline.transition("cleanup")
-        seen(State.UNCONFIGURED)
+    def baseline_reset(self) -> None:  # every node unconfigured, with the __DEFAULT__ values (untimed)
+        self.baseline.transition("deactivate")
+        self.baseline.transition("cleanup")
+        self.seen(State.UNCONFIGURED)
 
-    def manager_reset() -> None:  # the same, through the manager (untimed)
-        _confirmed(manager, lambda: manager.change_state(SYSTEM, "deactivate"))
-        _confirmed(manager, lambda: manager.change_state(SYSTEM, "cleanup"))
+    def manager_reset(self) -> None:  # the same, through the manager (untimed)
+        _confirmed(self.manager, lambda: self.manager.change_state(SYSTEM, "deactivate"))
+        _confirmed(self.manager, lambda: self.manager.change_state(SYSTEM, "cleanup"))
 
-    def baseline_bring_up() -> float:
-        elapsed = baseline.transition("configure") + baseline.transition("activate")
-        seen(State.ACTIVE)
+    def baseline_bring_up(self) -> float:
+        elapsed = self.baseline.transition("configure") + self.baseline.transition("activate")
+        self.seen(State.ACTIVE)
         return elapsed
 
-    def manager_two() -> float:
-        return (_confirmed(manager, lambda: manager.change_state(SYSTEM, "configure"))
-                + _confirmed(manager, lambda: manager.change_state(SYSTEM, "activate")))
+    def manager_two(self) -> float:
+        return (_confirmed(self.manager, lambda: self.manager.change_state(SYSTEM, "configure"))
+                + _confirmed(self.manager, lambda: self.manager.change_state(SYSTEM, "activate")))
 
-    def manager_one() -> float:
-        return _confirmed(manager, lambda: manager.change_mode(SYSTEM, "__DEFAULT__"))
+    def manager_one(self) -> float:
+        return _confirmed(self.manager, lambda: self.manager.change_mode(SYSTEM, "__DEFAULT__"))
+
+    def manager_to(self, mode: str) -> None:
+        self.baseline.clear()
+        self.times["switch"].append(_confirmed(self.manager, lambda: self.manager.change_mode(SYSTEM, mode)))
+        last_node_event, system_event = self.baseline.switch_events(self.count, mode)
+        self.delays.append(system_event - last_node_event)
+
+    def baseline_to(self, mode: str) -> None:
+        self.times["switch_baseline"].append(self.baseline.parameters(mode))
+        wait_for(lambda: all(self.manager.observation(n).parameters == self.values[mode][n]
+                             for n in self.baseline.nodes), "manager sees the baseline's values")
+
+
+def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, dict[str, dict[str, Any]]],
+           bring_ups: int, switches: int, count: int) -> list[Figure]:
+    turns = Turns(baseline, manager, values, count)
+    times, delays = turns.times, turns.delays
+    manager_one, manager_two, manager_reset = turns.manager_one, turns.manager_two, turns.manager_reset
+    baseline_bring_up, baseline_reset = turns.baseline_bring_up, turns.baseline_reset
+    manager_to, baseline_to = turns.manager_to, turns.baseline_to
 
     # Bring-up, each in turn from a shutdown it made itself, as in use (a manager's targets then
     # agree with the nodes; either side is measurably slower, by up to 1-2 ms of its 15-20, right
@@ -232,17 +259,6 @@ def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, di
         if index != bring_ups - 1:
             baseline_reset()
         baseline.rest()
-
-    def manager_to(mode: str) -> None:
-        baseline.clear()
-        times["switch"].append(_confirmed(manager, lambda: manager.change_mode(SYSTEM, mode)))
-        last_node_event, system_event = baseline.switch_events(count, mode)
-        delays.append(system_event - last_node_event)
-
-    def baseline_to(mode: str) -> None:
-        times["switch_baseline"].append(baseline.parameters(mode))
-        wait_for(lambda: all(manager.observation(n).parameters == values[mode][n] for n in baseline.nodes),
-              "manager sees the baseline's values")
 
     # Mode switches: the manager there and back, then the baseline there and back (the nodes end where
     # the manager's target wants them, so its next switch is a real one and publishes mode_event).

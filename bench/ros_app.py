@@ -36,7 +36,7 @@ from typing import Any
 
 from bench.figures import Figure
 from bench.ros import P1_GOAL, model_text
-from bench.ros_baseline import SYSTEM, TIMEOUT, freeze_garbage, node_values
+from bench.ros_baseline import SYSTEM, TIMEOUT, freeze_garbage, mode_values
 
 #: Per round and side on a full run: switches, bring-ups of each kind; rounds. ``--quick`` takes a few.
 SWITCHES, BRING_UPS, ROUNDS = 20, 8, 6
@@ -288,7 +288,7 @@ def run(quick: bool) -> list[Figure]:
         path.write_text(model_text(count))
         model = load_model(path)
         names = [f"bench_n{i}" for i in range(count)]
-        values = {mode: {n: node_values(model, n, mode) for n in names} for mode in ("__DEFAULT__", "FAST")}
+        values = mode_values(model, names)
         process = NodesProcess(str(path), "--state", "active").start()  # with the default mode's values
         try:
             for index in range(rounds):

@@ -13,7 +13,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -289,6 +289,12 @@ def node_values(model: Model, node: str, mode: str) -> dict[str, Any]:
     return spec.values()
 
 
+def mode_values(model: Model, nodes: Iterable[str]) -> dict[str, dict[str, dict[str, Any]]]:
+    """mode -> node -> its parameter values, for the benchmarks' two modes."""
+    names = list(nodes)
+    return {mode: {n: node_values(model, n, mode) for n in names} for mode in ("__DEFAULT__", "FAST")}
+
+
 def wait_for(condition: Callable[[], bool], what: str, limit: float = TIMEOUT) -> float:
     began = time.perf_counter()
     while not condition():
@@ -311,7 +317,7 @@ def _baseline_main(path: str) -> int:
 
     model = load_model(path)
     names = [part.name for part in model.nodes]
-    values = {mode: {n: node_values(model, n, mode) for n in names} for mode in ("__DEFAULT__", "FAST")}
+    values = mode_values(model, names)
     baseline = _Baseline(names)
     try:
         baseline.ready()

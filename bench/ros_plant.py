@@ -49,10 +49,9 @@ from pathlib import Path
 from typing import Any
 
 from bench.figures import Figure
-from bench.ros import P1_GOAL, P2_GOAL_MS, VANISH_GOAL, _confirmed, _cpu_seconds
-from bench.ros_baseline import SYSTEM, BaselineProcess, freeze_garbage, node_values, wait_for
+from bench.ros import P1_GOAL, P2_GOAL_MS, VANISH_GOAL, Turns, _cpu_seconds
+from bench.ros_baseline import SYSTEM, BaselineProcess, freeze_garbage, mode_values, wait_for
 from sm_bt.engine.manager import ModeManager
-from sm_bt.model.states import State
 from sm_bt.ros.node_process import NodesProcess
 
 #: The plant goal for the idle manager (bench/ros.py's 1 % is for 20 nodes in one process).
@@ -161,7 +160,7 @@ def run(quick: bool) -> list[Figure]:
         path = Path(tmp) / "bench_ros_plant.yaml"
         path.write_text(model_text(nodes))
         model = load_model(path)
-        values = {mode: {n: node_values(model, n, mode) for n in names} for mode in MODES}
+        values = mode_values(model, names)
         processes = [NodesProcess(str(path), "--state", "unconfigured", "--only", ",".join(group),
                                   ready_timeout=START_LIMIT) for group in nodes]
         baseline: BaselineProcess | None = None
@@ -244,32 +243,13 @@ def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, di
     ``change_mode`` and the whole-system switch. A turn that fails (a request or a raw call failed,
     or the manager did not see what the baseline did) is counted, with its reason, and the nodes
     are brought back through the manager; past ``MAX_FAILED`` the turns stop."""
-    times: dict[str, list[float]] = {key: [] for key in ("switch", "switch_baseline", "one", "bring_baseline")}
-    delays: list[float] = []
+    steps = Turns(baseline, manager, values, shape["nodes"])
+    times, delays = steps.times, steps.delays
     failed: list[str] = []
     count = shape["nodes"]
-
-    def seen(state: State) -> None:
-        """Untimed: the baseline moved the nodes behind the manager's back; let it see where they are."""
-        wait_for(lambda: all(manager.observation(n).state is state for n in baseline.nodes),
-                 f"manager sees {state.label}")
-
-    def baseline_reset() -> None:  # every node unconfigured, with the __DEFAULT__ values (untimed)
-        baseline.transition("deactivate")
-        baseline.transition("cleanup")
-        seen(State.UNCONFIGURED)
-
-    def manager_reset() -> None:  # the same, through the manager (untimed)
-        _confirmed(manager, lambda: manager.change_state(SYSTEM, "deactivate"))
-        _confirmed(manager, lambda: manager.change_state(SYSTEM, "cleanup"))
-
-    def baseline_bring_up() -> float:
-        elapsed = baseline.transition("configure") + baseline.transition("activate")
-        seen(State.ACTIVE)
-        return elapsed
-
-    def manager_one() -> float:
-        return _confirmed(manager, lambda: manager.change_mode(SYSTEM, "__DEFAULT__"))
+    manager_one, manager_reset = steps.manager_one, steps.manager_reset
+    baseline_bring_up, baseline_reset = steps.baseline_bring_up, steps.baseline_reset
+    manager_to, baseline_to = steps.manager_to, steps.baseline_to
 
     def failure(error: RuntimeError) -> None:
         failed.append(str(error)[:300])
@@ -318,17 +298,6 @@ def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, di
             attempt(bring_up_turn, shut_down)
         attempt(manager_one, manager_one)  # the switches start from __DEFAULT__
         _say(clock, f"{turns} bring-up turns done")
-
-    def manager_to(mode: str) -> None:
-        baseline.clear()
-        times["switch"].append(_confirmed(manager, lambda: manager.change_mode(SYSTEM, mode)))
-        last_node_event, system_event = baseline.switch_events(count, mode)
-        delays.append(system_event - last_node_event)
-
-    def baseline_to(mode: str) -> None:
-        times["switch_baseline"].append(baseline.parameters(mode))
-        wait_for(lambda: all(manager.observation(n).parameters == values[mode][n] for n in baseline.nodes),
-                 "manager sees the baseline's values")
 
     # The nodes end where the manager's target wants them, so its next switch is a real one.
     def switch_turn() -> None:
