@@ -69,8 +69,8 @@ class Job:
 
     def dismantle(self) -> None:
         """Its execution is over for good: drop the links up the tree and to the execution, so that
-        the plan holds no reference cycle and is freed as soon as nothing refers to it (rather than
-        by the garbage collector, some time later: at 100,000 nodes a plan is some 70 MB)."""
+        the plan holds no reference cycle and is freed as soon as nothing refers to it, rather than
+        by the garbage collector some time later (a big request's plan is tens of megabytes)."""
         self.parent = None
         self.run = OVER
 

@@ -3,9 +3,9 @@ alone what a long-running process keeps.
 
 Loading a model of 100,000 nodes, or building a manager over it, makes millions of objects that
 live on. Each full pass of the collector walks every one of them, and the passes come more often
-as the heap grows: at that size they were more than half of the load's time (docs/performance.md).
-What is built has no garbage cycles to find, so the passes find nothing. Paused, the objects are
-walked once, by the first collection after the pause.
+as the heap grows (what that cost is measured in docs/performance.md). What is built has no
+garbage cycles to find, so the passes find nothing. Paused, the objects are walked once, by the
+first collection after the pause.
 
 The pause nests and is shared between threads: the collector runs again when the last pause
 ends, and only if it ran when the first began.
@@ -22,8 +22,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 #: Allocations between young collections once frozen (CPython's default is 700), and young
-#: collections between full ones. A request over 100,000 nodes keeps millions of objects alive
-#: until it ends; with the defaults the collector walked them again and again (docs/performance.md).
+#: collections between full ones. A request over a big model keeps millions of objects alive until
+#: it ends; with the defaults the collector walked them again and again (docs/performance.md).
 LONG_RUN_THRESHOLDS = (50_000, 10, 100)
 
 _lock = threading.Lock()

@@ -213,16 +213,14 @@ class SimBackend:
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
         call = _PendingCall(node, transition.label, done)
-        if self._history:  # the text only for a kept history: a bring-up of 100,000 nodes makes 400,000
-            self._record(node, SimEventKind.REQUEST, f"change_state {transition.label} ({int(transition)})")
+        self._record(node, SimEventKind.REQUEST, lambda: f"change_state {transition.label} ({int(transition)})")
         if self._accept(call):
             self._after(node, 0.0, functools.partial(self._deliver_transition, call, transition))
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         values = dict(parameters)
         call = _PendingCall(node, "set_parameters", done)
-        if self._history:
-            self._record(node, SimEventKind.REQUEST, f"set_parameters {format_values(values)}", parameters=values)
+        self._record(node, SimEventKind.REQUEST, lambda: f"set_parameters {format_values(values)}", parameters=values)
         if self._accept(call):
             self._after(node, self.parameter_delay, lambda: self._deliver_parameters(call, values))
 
@@ -421,9 +419,8 @@ class SimBackend:
         pending = self._pending.get(call.node, [])
         if call in pending:
             pending.remove(call)
-        if self._history:
-            outcome = "ok" if result.ok else f"failed: {result.reason}"
-            self._record(call.node, SimEventKind.RESPONSE, f"{call.label}: {outcome}")
+        self._record(call.node, SimEventKind.RESPONSE,
+                     lambda: f"{call.label}: {'ok' if result.ok else f'failed: {result.reason}'}")
         call.done(result)
 
     # -- process life -------------------------------------------------------------------------------
@@ -475,19 +472,21 @@ class SimBackend:
         self._reports.appeared(node, NodeReport(sim.state, sim.parameters, lifecycle=sim.lifecycle))
 
     def _moved(self, node: str, event: TransitionEvent) -> None:
-        if self._history:
-            self._record(node, SimEventKind.TRANSITION, str(event), transition=event)
+        self._record(node, SimEventKind.TRANSITION, event.__str__, transition=event)
         self._reports.state(node, event.goal)
 
     def _parameters_changed(self, node: str, values: Mapping[str, ParamValue]) -> None:
-        if self._history:
-            self._record(node, SimEventKind.PARAMETERS, format_values(values), parameters=dict(values))
+        self._record(node, SimEventKind.PARAMETERS, lambda: format_values(values), parameters=values)
         self._reports.parameters(node, values)
 
-    def _record(self, node: str, kind: SimEventKind, details: str, *, transition: TransitionEvent | None = None,
-                parameters: Mapping[str, ParamValue] | None = None) -> None:
+    def _record(self, node: str, kind: SimEventKind, details: str | Callable[[], str], *,
+                transition: TransitionEvent | None = None, parameters: Mapping[str, ParamValue] | None = None) -> None:
+        """Keep an event in the history, if one is kept. ``details`` may be a function that makes the
+        text: a big bring-up makes several events per node, and no text is needed without a history."""
         if self._history:
-            self.events.append(SimEvent(self._clock.now(), node, kind, details, transition, parameters))
+            text = details if isinstance(details, str) else details()
+            self.events.append(SimEvent(self._clock.now(), node, kind, text, transition,
+                                        None if parameters is None else dict(parameters)))
 
     def _after(self, node: str, delay: float, action: Callable[[], None]) -> None:
         """Schedule ``action`` on behalf of ``node``'s process, so that a crash or restart cancels it."""
