@@ -9,7 +9,9 @@ manager`` does (:func:`~sm_bt.model.gc_tuning.freeze_long_lived`); construction 
 P3 times the manager's handling of single node events (inference, divergences, request
 progress, events to observers), seen at the backend listener: every node report of a
 whole-system mode change (the median is the goal's figure), and a fault event that flips one
-node's mode and with it every system above it (its worst case). The growth from N = 1,000 to
+node's mode and with it every system above it (its worst case). Reports that come at one simulated
+instant are one batch, settled once (:meth:`~sm_bt.engine.backend.BackendListener.batch`): each of
+them counts as the batch's time over the reports in it. The growth from N = 1,000 to
 10,000 comes from managers of both sizes changing modes in turns, in the same minute.
 """
 
@@ -67,9 +69,27 @@ class _TimedListener:
         self._listener = listener
         self.on = False
         self.times: list[float] = []
+        self._batched: int | None = None  # reports in the batch under way
+
+    @contextmanager
+    def batch(self) -> Iterator[None]:
+        if self._batched is not None:  # within another: counted there
+            yield
+            return
+        self._batched = 0
+        start = time.perf_counter()
+        try:
+            with self._listener.batch():
+                yield
+        finally:
+            elapsed, reports, self._batched = time.perf_counter() - start, self._batched, None
+            if self.on and reports:
+                self.times += [elapsed / reports] * reports
 
     def _timed(self, call: Callable[[], None]) -> None:
-        if not self.on:
+        if self._batched is not None:
+            self._batched += 1
+        if not self.on or self._batched is not None:
             call()
             return
         start = time.perf_counter()

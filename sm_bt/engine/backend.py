@@ -15,11 +15,15 @@ Contract for implementations:
   before or after the ``done`` of the request that caused them.
 * ``set_parameters`` is atomic: all values are applied, or none.
 * Listener and ``done`` callbacks may come from any thread; the manager serialises them.
+* Reports and ``done`` callbacks that arrive together (a simulated instant, say) may be made
+  inside ``with listener.batch():``: the manager applies each in order and settles once, at the
+  end, rather than once per report.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -69,6 +73,10 @@ class BackendListener(Protocol):
     def node_parameters(self, node: str, changed: Mapping[str, ParamValue]) -> None: ...
 
     def node_vanished(self, node: str, reason: str) -> None: ...
+
+    def batch(self) -> AbstractContextManager[None]:
+        """Reports and ``done`` callbacks made inside are handled together (see the module)."""
+        ...
 
 
 class Backend(Protocol):

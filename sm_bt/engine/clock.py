@@ -14,9 +14,14 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from typing import Protocol
 
 log = logging.getLogger("sm_bt.clock")
+
+#: Callbacks of one instant run in batches of at most this many: one settle serves them all, and
+#: the observers of the manager still hear of the first ones before the rest run.
+BATCH_LIMIT = 256
 
 
 class TimerHandle(Protocol):
@@ -140,11 +145,19 @@ class _Queue:
 
 
 class VirtualClock:
-    """A clock that only moves when told to; callbacks run in due-time order, then FIFO."""
+    """A clock that only moves when told to; callbacks run in due-time order, then FIFO.
+
+    The callbacks due at one instant run inside ``with batch():``, up to :data:`BATCH_LIMIT` at a
+    time. A simulated backend sets it to its listener's
+    :meth:`~sm_bt.engine.backend.BackendListener.batch`, so that what its nodes report at one
+    instant is handled together, as a real backend's executor hands over what came in while it
+    waited.
+    """
 
     def __init__(self, start: float = 0.0) -> None:
         self._now = start
         self._queue = _Queue()
+        self.batch: Callable[[], AbstractContextManager[None]] = nullcontext
 
     def now(self) -> float:
         return self._now
@@ -164,9 +177,13 @@ class VirtualClock:
         """Run callbacks due up to ``when`` (including ones they schedule), then set the time to it."""
         queue = self._queue
         while (timer := queue.first()) is not None and timer.due <= when:
-            queue.pop()
-            self._now = max(self._now, timer.due)
-            timer.fire()
+            instant = timer.due
+            self._now = max(self._now, instant)
+            with self.batch():  # callbacks scheduled for this instant meanwhile join it
+                for _ in range(BATCH_LIMIT):
+                    queue.pop().fire()
+                    if (timer := queue.first()) is None or timer.due > instant:
+                        break
         self._now = max(self._now, when)
 
     def run_pending(self) -> None:

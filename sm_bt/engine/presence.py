@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable, Mapping
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 
 from sm_bt.engine.backend import NodeReport
@@ -64,6 +65,10 @@ class NodeReports:
         self._renew_budgets = renew_budgets
         self._away: dict[str, tuple[float, StateMode]] = {}  # vanished nodes: since when, and as they were
         self.returns: dict[str, NodeReturn] = {}  # the last time each node came back
+
+    def batch(self) -> AbstractContextManager[None]:
+        """One entry for everything made inside: the manager settles once, when it ends."""
+        return self._serialiser
 
     def node_appeared(self, node: str, report: NodeReport) -> None:
         with self._serialiser:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Collection, Mapping, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
@@ -203,6 +204,7 @@ class SimBackend:
     def attach(self, nodes: Sequence[str], listener: BackendListener) -> None:
         """Report to ``listener`` about ``nodes``: running ones appear now, others when they start."""
         self._reports.attach(nodes, listener)
+        self._clock.batch = listener.batch
         for name in dict.fromkeys(nodes):
             if self._status.get(name) is NodeStatus.RUNNING:
                 self._appear(name)
@@ -210,6 +212,7 @@ class SimBackend:
     def detach(self) -> None:
         """Stop all listener reports. Calls in flight still get their ``done``."""
         self._reports.detach()
+        self._clock.batch = nullcontext
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
         call = _PendingCall(node, transition.label, done)

@@ -213,6 +213,25 @@ def test_parallel_by_default() -> None:
     assert starts["manipulator"] == starts["drive_base"]
 
 
+def test_nodes_that_answer_at_one_instant_are_settled_together(rig: SimulatedSystem) -> None:
+    """The two nodes finish at one instant: the first event any observer hears already comes after
+    both reports (one settle for the instant, not one per report), and nothing is lost."""
+    heard: list[tuple[str, str, str]] = []
+
+    def observe(event) -> None:  # type: ignore[no-untyped-def]
+        heard.append((event.part, str(rig.manager.actual("manipulator")), str(rig.manager.actual("drive_base"))))
+
+    request = rig.manager.change_mode("actuation", "PERFORMANCE")
+    rig.manager.subscribe(observe, part=["manipulator", "drive_base"], kinds=[EventKind.ACTUAL])
+    rig.finish(request)
+    assert heard and heard[-1][1:] == ("active.STRONG", "active.FAST")
+    firsts = {}
+    for part, manipulator, drive_base in heard:
+        firsts.setdefault(part, (manipulator, drive_base))
+    assert firsts["manipulator"] == firsts["drive_base"]  # both had moved when either was told
+    assert [part for part, *_ in heard].count("manipulator") == [part for part, *_ in heard].count("drive_base")
+
+
 def test_going_down_ignores_dont_care_parts() -> None:
     rig = SimulatedSystem(fixture("nested"), rules=False, recovery=False)
     rig.finish(rig.manager.change_mode("robot", "WORK"))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import threading
 import time
@@ -15,7 +16,7 @@ from hypothesis import strategies as st
 from hypothesis_profiles import examples
 from model_files import bundled
 
-from sm_bt.engine.clock import VirtualClock, WallClock, _Queue
+from sm_bt.engine.clock import BATCH_LIMIT, VirtualClock, WallClock, _Queue
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.manager import ModeManager
 from sm_bt.sim import SimBackend
@@ -249,3 +250,41 @@ def _run_plan(plan: list[tuple[int, bool, int]]) -> None:
 def _assert_counted(queue: _Queue) -> None:
     """The queue's count of cancelled timers is the number it holds (it decides the rebuild)."""
     assert queue._cancelled == sum(1 for _, _, timer in queue._heap if timer.cancelled)
+
+
+def test_the_virtual_clock_runs_each_instant_inside_one_batch() -> None:
+    """The callbacks due at one instant run inside one ``batch()``, with those they schedule for
+    that instant; a later instant has a batch of its own."""
+    clock = VirtualClock()
+    log: list[str] = []
+
+    @contextlib.contextmanager
+    def batch() -> Iterator[None]:
+        log.append(f"begin {clock.now()}")
+        yield
+        log.append("end")
+
+    clock.batch = batch
+    clock.call_later(1.0, lambda: log.append("a"))
+    clock.call_later(1.0, lambda: (log.append("b"), clock.call_later(0.0, lambda: log.append("c"))))
+    clock.call_later(2.0, lambda: log.append("d"))
+    clock.advance(5.0)
+    assert log == ["begin 1.0", "a", "b", "c", "end", "begin 2.0", "d", "end"]
+
+
+def test_an_instant_with_more_callbacks_than_the_batch_limit_runs_in_several_batches() -> None:
+    clock = VirtualClock()
+    sizes: list[int] = []
+    ran: list[int] = []
+
+    @contextlib.contextmanager
+    def batch() -> Iterator[None]:
+        before = len(ran)
+        yield
+        sizes.append(len(ran) - before)
+
+    clock.batch = batch
+    for index in range(BATCH_LIMIT + 44):
+        clock.call_later(1.0, functools.partial(ran.append, index))
+    clock.advance(1.0)
+    assert sizes == [BATCH_LIMIT, 44] and ran == list(range(BATCH_LIMIT + 44))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -490,3 +491,22 @@ def test_a_call_made_when_restart_fails_the_old_ones_reaches_the_new_process() -
     backend.clock.advance(1.0)
     assert results == [CallResult(False, "node amcl restarted"), CallResult(True)]
     assert backend.node("amcl").parameters["alpha1"] == 0.1
+
+
+def test_what_happens_at_one_instant_is_reported_in_one_batch() -> None:
+    """Two nodes that finish at one instant are reported together (the manager settles once);
+    one that finishes later is a batch of its own, and nothing is batched once detached."""
+    backend, recorder = attached(transition_delay=1.0)
+    backend.trigger("amcl", T.CONFIGURE)
+    backend.trigger("laser_resender", T.CONFIGURE)
+    backend.clock.advance(1.0)
+    assert [recorder.reports[i] for i in range(*recorder.batches[0])] == [
+        ("state", "amcl", S.INACTIVE), ("state", "laser_resender", S.INACTIVE)]
+    backend.set_delay("amcl", 2.0)
+    backend.trigger("amcl", T.ACTIVATE)
+    backend.trigger("laser_resender", T.ACTIVATE)
+    backend.clock.advance(3.0)
+    assert [[recorder.reports[i][1:] for i in range(*b)] for b in recorder.batches[1:]] == [
+        [("laser_resender", S.ACTIVE)], [("amcl", S.ACTIVE)]]
+    backend.detach()
+    assert backend.clock.batch is contextlib.nullcontext

@@ -420,6 +420,9 @@ class _AppearanceWatch:
     def node_vanished(self, node: str, reason: str) -> None:
         self._listener.node_vanished(node, reason)
 
+    def batch(self) -> contextlib.AbstractContextManager[None]:
+        return self._listener.batch()
+
 
 def _watch_appearances(backend: SimBackend, seen: Callable[[str], None]) -> None:
     """Have ``seen(node)`` called on every appearance ``backend`` reports to whoever attaches."""

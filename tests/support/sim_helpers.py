@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from contextlib import AbstractContextManager
+from types import TracebackType
 from typing import Any
 
 from sm_bt.engine.backend import NodeReport
@@ -28,6 +30,8 @@ class Recorder:
 
     def __init__(self) -> None:
         self.reports: list[tuple[str, str, Any]] = []
+        #: (first, end) indices into ``reports`` of each batch that had reports in it.
+        self.batches: list[tuple[int, int]] = []
 
     def node_appeared(self, node: str, report: NodeReport) -> None:
         self.reports.append(("appeared", node, report))
@@ -41,11 +45,30 @@ class Recorder:
     def node_vanished(self, node: str, reason: str) -> None:
         self.reports.append(("vanished", node, reason))
 
+    def batch(self) -> AbstractContextManager[None]:
+        """Notes where each batch began and ended in :attr:`reports` (as ``batches``)."""
+        return _Batch(self)
+
     def states(self, node: str) -> list[State]:
         return [p for kind, n, p in self.reports if kind == "state" and n == node]
 
     def about(self, node: str) -> list[tuple[str, Any]]:
         return [(kind, payload) for kind, n, payload in self.reports if n == node]
+
+
+class _Batch:
+    def __init__(self, recorder: Recorder) -> None:
+        self._recorder = recorder
+        self._first = 0
+
+    def __enter__(self) -> None:
+        self._first = len(self._recorder.reports)
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        end = len(self._recorder.reports)
+        if end > self._first:
+            self._recorder.batches.append((self._first, end))
 
 
 def attached(model: Model, **options: Any) -> tuple[SimBackend, Recorder]:
