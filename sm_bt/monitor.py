@@ -14,7 +14,6 @@ import json
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from typing import Any, TextIO, cast
 
 from rich import box
@@ -23,80 +22,23 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from sm_bt.engine.events import Cause, Event, EventKind
+from sm_bt.engine.events import Event
 from sm_bt.engine.manager import ModeManager
+from sm_bt.monitor_rows import INFERRED, ROW_EVENTS, Row, Rows, Selection, Summary, snapshot
 
-INFERRED = "(*)"
 #: Row styles: divergences that rules/recovery (or a human) must deal with, and ones that are settling.
 ERROR_STYLE = "bold red"
 TRANSIENT_STYLE = "yellow"
-#: The events that can change a row; requests, rules and failures show through these.
-_ROW_EVENTS = frozenset({EventKind.ACTUAL, EventKind.TARGET, EventKind.DIVERGENCE})
 
 JsonSnapshot = dict[str, Any]
 
-
-@dataclass(frozen=True)
-class Row:
-    """One part as the monitor shows it.
-
-    ``raw_state``/``raw_mode`` are the actual values, ``state_inferred``/``mode_inferred`` say
-    whether they were inferred; ``actual_state``/``actual_mode`` add the ``(*)`` marker for
-    display. ``cause`` and ``since`` describe the divergence (``None`` when on target), ``error``
-    is true when it is beyond the grace period and unexplained (fault or override). ``held_by``:
-    who holds the part (:mod:`~sm_bt.engine.holds`; "" when nobody).
-    """
-
-    part: str
-    kind: str
-    target_state: str
-    target_mode: str
-    raw_state: str
-    raw_mode: str
-    state_inferred: bool
-    mode_inferred: bool
-    cause: Cause | None = None
-    since: float | None = None
-    error: bool = False
-    held_by: str = ""
-
-    @property
-    def actual_state(self) -> str:
-        return self.raw_state + (INFERRED if self.state_inferred else "")
-
-    @property
-    def actual_mode(self) -> str:
-        return self.raw_mode + (INFERRED if self.raw_mode and self.mode_inferred else "")
-
-    @property
-    def diverges(self) -> bool:
-        return self.cause is not None
+__all__ = ["ERROR_STYLE", "INFERRED", "TRANSIENT_STYLE", "Monitor", "Row", "Selection", "Summary", "held", "legend",
+           "render_rich", "render_text", "row_style", "snapshot", "terminal_console", "to_json"]
 
 
-def snapshot(manager: ModeManager) -> list[Row]:
-    """One row per part: systems, then nodes, each sorted by name."""
-    rows: list[Row] = []
-    for status in sorted(manager.snapshot(), key=lambda s: (s.is_node, s.part)):
-        actual, target, divergence = status.actual, status.target, status.divergence
-        rows.append(Row(
-            part=status.part,
-            kind=status.kind.value,
-            target_state=target.state.label if target else "",
-            target_mode=(target.mode or "") if target else "",
-            raw_state=actual.state.label,
-            raw_mode=actual.mode or "",
-            state_inferred=actual.state_inferred,
-            mode_inferred=bool(actual.mode) and actual.mode_inferred,
-            cause=divergence.cause if divergence else None,
-            since=divergence.since if divergence else None,
-            error=divergence is not None and divergence.is_error,
-            held_by=status.held_by,
-        ))
-    return rows
-
-
-def render_text(rows: list[Row]) -> str:
-    """A plain-text table (no colours), the layout of the reference's monitor."""
+def render_text(rows: list[Row], summary: Summary | None = None) -> str:
+    """A plain-text table (no colours), the layout of the reference's monitor; ``summary`` (when
+    some parts are left out) under it."""
     header = ("part", "target state", "actual state", "target mode", "actual mode")
     cells = [header] + [(r.part, r.target_state, r.actual_state, r.target_mode, r.actual_mode) for r in rows]
     widths = [max(len(row[i]) for row in cells) for i in range(len(header))]
@@ -110,6 +52,8 @@ def render_text(rows: list[Row]) -> str:
         lines.append(mark + "  ".join(t.ljust(widths[i]) for i, t in enumerate(text)).rstrip())
     lines.append(" (*) = inferred    ! = diverges from target")
     lines.extend(f" held by {holder}: {', '.join(parts)}" for holder, parts in held(rows).items())
+    if summary is not None:
+        lines.append(f" {summary.describe()}")
     return "\n".join(lines)
 
 
@@ -178,12 +122,15 @@ def _value(raw: str, inferred: bool) -> Text:
     return text
 
 
-def render_rich(rows: list[Row], *, title: str | None = None) -> Table:
+def render_rich(rows: list[Row], *, title: str | None = None, summary: Summary | None = None) -> Table:
     """The table for a rich console: a ``systems`` section then a ``nodes`` section, ``(*)`` kept
-    (dimmed), each diverging row styled by :func:`row_style`, and the legend as caption."""
+    (dimmed), each diverging row styled by :func:`row_style`, and the legend as caption, with
+    ``summary`` (when some parts are left out)."""
     caption = legend()
     for holder, parts in held(rows).items():
         caption.append(f"\nheld by {holder}: {', '.join(parts)}")
+    if summary is not None:
+        caption.append(f"\n{summary.describe()}", style="bold")
     table = Table(title=title, caption=caption, box=box.SIMPLE_HEAD, caption_justify="left",
                   pad_edge=False)
     table.add_column("", no_wrap=True, min_width=1)
@@ -203,12 +150,17 @@ def render_rich(rows: list[Row], *, title: str | None = None) -> Table:
     return table
 
 
-def to_json(rows: list[Row], now: float, epoch: float = 0.0) -> JsonSnapshot:
+def to_json(rows: list[Row], now: float, epoch: float = 0.0, summary: Summary | None = None) -> JsonSnapshot:
     """A JSON-serialisable snapshot at clock time ``now``: raw values (``null`` when absent),
     inferred flags, and the divergence (``null`` when on target). Every time in it (``time``, a
     divergence's ``since``) is in seconds since ``epoch``, the start of the run, on the manager's
-    clock (virtual seconds on simulated nodes), rounded to the microsecond."""
-    return {"time": round(now - epoch, 6), "parts": [_json_row(row, epoch) for row in rows]}
+    clock (virtual seconds on simulated nodes), rounded to the microsecond. ``summary``, if given,
+    is its counts under ``"summary"``."""
+    data: JsonSnapshot = {"time": round(now - epoch, 6), "parts": [_json_row(row, epoch) for row in rows]}
+    if summary is not None:
+        data["summary"] = {"parts": summary.parts, "systems": summary.systems, "nodes": summary.nodes,
+                           "diverging": summary.diverging, "errors": summary.errors, "shown": summary.shown}
+    return data
 
 
 def _json_row(row: Row, epoch: float) -> dict[str, Any]:
@@ -234,28 +186,39 @@ class Monitor:
     """Keeps a view of ``manager`` up to date: a rich table on a :class:`Console`, or JSON Lines on
     a text stream.
 
-    The manager's callbacks run inside its lock, possibly in another thread, so they only mark
-    the view dirty; the owner calls :meth:`refresh` (from its loop) to render, and only a change
-    of the rows renders anything. ``title`` is shown above the table with the clock time, counted
-    from ``epoch`` (a wall clock's raw monotonic time means nothing to a reader: pass its start).
+    The manager's callbacks run inside its lock, possibly in another thread, so they only note
+    which parts changed; the owner calls :meth:`refresh` (from its loop) to render, and only a
+    change of what is shown renders anything. ``title`` is shown above the table with the clock
+    time, counted from ``epoch`` (a wall clock's raw monotonic time means nothing to a reader: pass
+    its start). ``selection`` says which parts are shown (:class:`~sm_bt.monitor_rows.Selection`;
+    when it leaves some out, the summary says how many there are). With ``changes``, each JSON line
+    after the first has only the rows that changed since the line before, and under ``"left"`` the
+    parts no longer shown.
     """
 
     def __init__(self, manager: ModeManager, output: Console | TextIO, *, title: str | None = None,
-                 epoch: float = 0.0) -> None:
+                 epoch: float = 0.0, selection: Selection | None = None, changes: bool = False) -> None:
         self.manager = manager
         self.epoch = epoch
         self.output = output
         self.title = title
+        self.changes = changes
         #: How many times the view was rendered (tables printed, live updates, JSON lines).
         self.renders = 0
         self._dirty = True
-        self._last: list[Row] | None = None
+        self._last: tuple[list[Row], Summary] | None = None
         self._live: Live | None = None
-        self._subscription = manager.subscribe(self._changed, kinds=_ROW_EVENTS)
+        with manager.lock:
+            self._rows = Rows(manager, selection or Selection())
+            self._subscription = manager.subscribe(self._changed, kinds=ROW_EVENTS)
 
     @property
     def json(self) -> bool:
         return not isinstance(self.output, Console)
+
+    @property
+    def selection(self) -> Selection:
+        return self._rows.selection
 
     @property
     def dirty(self) -> bool:
@@ -263,31 +226,37 @@ class Monitor:
         return self._dirty
 
     def _changed(self, event: Event) -> None:
+        self._rows.changed(event)
         self._dirty = True
 
-    def table(self, rows: list[Row] | None = None) -> Table:
-        """The current table (``rows`` if given), titled with the clock time."""
+    def current(self) -> tuple[list[Row], Summary]:
+        """The rows shown now and the summary of all parts."""
+        return self._rows.current()
+
+    def table(self, shown: tuple[list[Row], Summary] | None = None) -> Table:
+        """The current table (``shown``: rows and summary, if given), titled with the clock time."""
         now = f"t = {self.manager.clock.now() - self.epoch:.2f} s"
         title = f"{self.title} at {now}" if self.title else now
-        return render_rich(snapshot(self.manager) if rows is None else rows, title=title)
+        rows, summary = self.current() if shown is None else shown
+        return render_rich(rows, title=title, summary=summary if summary.shown < summary.parts else None)
 
     def print_table(self) -> None:
-        """Print the current view now, changed or not (a table, or one JSON line)."""
+        """Print the current view now, changed or not (a table, or one JSON line, always whole)."""
         self._dirty = False
-        rows = snapshot(self.manager)
-        self._last = rows
-        self._show(rows, live=False)
+        shown = self.current()
+        self._show(shown, None, live=False)
+        self._last = shown
 
     def refresh(self) -> bool:
-        """Render if the rows changed since the last render; return whether it did."""
+        """Render if what is shown changed since the last render; return whether it did."""
         if not self._dirty:
             return False
-        self._dirty = False  # before the snapshot: a change during it marks dirty again
-        rows = snapshot(self.manager)
-        if rows == self._last:
+        self._dirty = False  # before reading: a change meanwhile marks dirty again
+        shown = self.current()
+        if shown == self._last:
             return False
-        self._last = rows
-        self._show(rows, live=self._live is not None)
+        self._show(shown, self._last, live=self._live is not None)
+        self._last = shown
         return True
 
     @contextmanager
@@ -298,7 +267,7 @@ class Monitor:
             yield self
             return
         self._dirty = False
-        self._last = snapshot(self.manager)
+        self._last = self.current()
         with Live(self.table(self._last), console=self.output, auto_refresh=False) as live:
             self.renders += 1
             self._live = live
@@ -311,13 +280,24 @@ class Monitor:
         """Stop following the manager."""
         self._subscription.cancel()
 
-    def _show(self, rows: list[Row], *, live: bool) -> None:
+    def _show(self, shown: tuple[list[Row], Summary], before: tuple[list[Row], Summary] | None, *,
+              live: bool) -> None:
         self.renders += 1
         if isinstance(self.output, Console):
             if live and self._live is not None:
-                self._live.update(self.table(rows), refresh=True)
+                self._live.update(self.table(shown), refresh=True)
             else:
-                self.output.print(self.table(rows))
+                self.output.print(self.table(shown))
+            return
+        rows, summary = shown
+        data: JsonSnapshot
+        if self.changes and before is not None:
+            earlier = {row.part: row for row in before[0]}
+            now = {row.part for row in rows}
+            data = to_json([row for row in rows if earlier.get(row.part) != row], self.manager.clock.now(),
+                           self.epoch, summary)
+            data["left"] = [part for part in earlier if part not in now]
         else:
-            self.output.write(json.dumps(to_json(rows, self.manager.clock.now(), self.epoch)) + "\n")
-            self.output.flush()
+            data = to_json(rows, self.manager.clock.now(), self.epoch, summary)
+        self.output.write(json.dumps(data) + "\n")
+        self.output.flush()

@@ -13,22 +13,23 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from contextlib import AbstractContextManager, ExitStack, nullcontext
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TextIO, cast
 
 from rich.console import Console
 
 from sm_bt import bundled
-from sm_bt.cli.arguments import non_negative
-from sm_bt.cli.common import PROG, check_request, load_or_report
+from sm_bt.cli.arguments import non_negative, positive_int
+from sm_bt.cli.common import PROG, UsageError, check_request, load_or_report
 from sm_bt.engine.clock import Clock
 from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
+from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.types import Model
-from sm_bt.monitor import Monitor, terminal_console
+from sm_bt.monitor import Monitor, Selection, terminal_console
 from sm_bt.sim import SimulatedSystem
 
 STEP = 0.1  # virtual seconds per clock advance: appended output changes at most this often
@@ -43,6 +44,11 @@ MANAGER_LOOKOUT = 3.0
 MANAGER_SETTLE = 0.25
 ROS_NODE_NAME = "sm_bt_monitor"  # not the reference manager's name: a manager may run alongside
 _EPSILON = 1e-9
+#: Rows shown at most by default when the table is appended (a pipe, a file, --once).
+APPENDED_ROWS = 100
+#: Lines of an in-place table that are not rows (title, header, sections, legend, summary), and the
+#: fewest rows it shows on a short terminal.
+TABLE_LINES, MIN_ROWS = 10, 5
 
 
 @dataclass(frozen=True)
@@ -89,6 +95,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print JSON Lines snapshots on stdout instead of the table (one per change); "
                              "their times ('time', a divergence's 'since') are seconds since the start of "
                              "the run (virtual seconds on simulated nodes)")
+    parser.add_argument("--changes", action="store_true",
+                        help="with --json: each line after the first has only the rows that changed since the "
+                             "line before (and under 'left' the parts no longer shown)")
+    parser.add_argument("--part", action="append", default=[], metavar="PATTERN", dest="parts",
+                        help="show only the parts whose names match (shell-style: *, ?, [abc]; repeatable)")
+    parser.add_argument("--diverging", action="store_true", help="show only the parts that diverge from their target")
+    parser.add_argument("--rows", type=positive_int, metavar="N",
+                        help="show at most N parts, errors first, then other divergences, then the rest (default: "
+                             f"what fits on a terminal, {APPENDED_ROWS} when appended to a pipe or a file, all "
+                             "with --json); a line under the table says how many there are")
     parser.add_argument("--once", action="store_true", help="print one table (or snapshot) at the end, and exit")
     parser.add_argument("--lenient", action="store_true",
                         help="accept what the reference implementation accepts where sm_bt is stricter")
@@ -99,12 +115,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-
+    if args.changes and not args.json:
+        raise UsageError("--changes is for --json lines (a table always shows what is there now)")
     model = load_or_report(args.model, strict=not args.lenient)
     if model is None:
         return 1
     for change in args.change:
         check_request(model, change.part, change.value, "--change", args.model)
+    for pattern in args.parts:
+        if not Selection((pattern,)).names(model.parts):
+            raise UsageError(f"--part {pattern}: matches no part of {args.model}"
+                             f"{did_you_mean(pattern, model.parts) or ' (parts: ' + _some(model.parts) + ')'}")
     for warning in model.warnings:
         print(warning, file=sys.stderr)
     advance: Callable[[float], None]
@@ -120,11 +141,26 @@ def run(args: argparse.Namespace) -> int:
             system = stack.enter_context(SimulatedSystem(model, record=False))
             manager = system.manager
             advance = _paced(system.run, args.speed)
-        monitor = Monitor(manager, sys.stdout if args.json else terminal_console(), title=args.model,
-                          epoch=manager.clock.now())
+        output = sys.stdout if args.json else terminal_console()
+        monitor = Monitor(manager, output, title=args.model, epoch=manager.clock.now(), changes=args.changes,
+                          selection=Selection(tuple(args.parts), args.diverging, _rows(args, output)))
         stack.callback(monitor.close)
         watch = _Watch(manager, manager.clock, advance, monitor, show=not args.once)
         return _watch(args, model, watch, monitor, graph)
+
+
+def _some(names: Iterable[str], shown: int = 10) -> str:
+    names = list(names)
+    return ", ".join(names[:shown]) + (f", ... ({len(names):,} in all)" if len(names) > shown else "")
+
+
+def _rows(args: argparse.Namespace, output: Console | TextIO) -> int | None:
+    """At most how many rows to show: ``--rows``, else what fits (see its help)."""
+    if args.rows is not None or not isinstance(output, Console):
+        return cast(int | None, args.rows)
+    if output.is_terminal and not args.once:  # in place: a table taller than the screen scrolls away
+        return max(MIN_ROWS, output.size.height - TABLE_LINES)
+    return APPENDED_ROWS
 
 
 def _ros_runtime(model: Model, stack: ExitStack) -> Any:

@@ -36,8 +36,8 @@ from py_trees.common import Status
 
 from sm_bt.engine.events import Event, EventKind
 from sm_bt.engine.manager import ModeManager
-from sm_bt.monitor import Row
-from sm_bt.monitor import snapshot as mode_rows
+from sm_bt.monitor_rows import Row
+from sm_bt.monitor_rows import snapshot as mode_rows
 from sm_bt.tree_snapshot import detail_of, kind_of
 
 Frame = dict[str, Any]

@@ -1,0 +1,234 @@
+"""The mode monitor's rows: one per part, and which of them to show.
+
+A model of a hundred thousand nodes has more parts than any screen or reader, so the monitor
+shows a :class:`Selection` of them: the parts whose names match a pattern, only the diverging
+ones, or at most a number of rows, the divergences that are errors first, then the other
+divergences, then the rest. A :class:`Summary` says how many there are of each. :class:`Rows`
+keeps the selection up to date from the manager's events: an event costs a set insertion, and a
+refresh makes rows only for the parts it shows that changed.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from sm_bt.engine.events import Cause, Event, EventKind
+from sm_bt.engine.manager import ModeManager
+from sm_bt.engine.snapshots import PartSnapshot
+from sm_bt.model.hierarchy import parts_below
+from sm_bt.model.types import NodePart, SystemPart
+
+INFERRED = "(*)"
+#: The events that can change a row (requests, rules and failures show through these).
+ROW_EVENTS = frozenset({EventKind.ACTUAL, EventKind.TARGET, EventKind.DIVERGENCE, EventKind.HOLD})
+
+
+@dataclass(frozen=True)
+class Row:
+    """One part as the monitor shows it.
+
+    ``raw_state``/``raw_mode`` are the actual values, ``state_inferred``/``mode_inferred`` say
+    whether they were inferred; ``actual_state``/``actual_mode`` add the ``(*)`` marker for
+    display. ``cause`` and ``since`` describe the divergence (``None`` when on target), ``error``
+    is true when it is beyond the grace period and unexplained (fault or override). ``held_by``:
+    who holds the part (:mod:`~sm_bt.engine.holds`; "" when nobody).
+    """
+
+    part: str
+    kind: str
+    target_state: str
+    target_mode: str
+    raw_state: str
+    raw_mode: str
+    state_inferred: bool
+    mode_inferred: bool
+    cause: Cause | None = None
+    since: float | None = None
+    error: bool = False
+    held_by: str = ""
+
+    @property
+    def actual_state(self) -> str:
+        return self.raw_state + (INFERRED if self.state_inferred else "")
+
+    @property
+    def actual_mode(self) -> str:
+        return self.raw_mode + (INFERRED if self.raw_mode and self.mode_inferred else "")
+
+    @property
+    def diverges(self) -> bool:
+        return self.cause is not None
+
+
+def row_of(status: PartSnapshot) -> Row:
+    actual, target, divergence = status.actual, status.target, status.divergence
+    return Row(
+        part=status.part,
+        kind=status.kind.value,
+        target_state=target.state.label if target else "",
+        target_mode=(target.mode or "") if target else "",
+        raw_state=actual.state.label,
+        raw_mode=actual.mode or "",
+        state_inferred=actual.state_inferred,
+        mode_inferred=bool(actual.mode) and actual.mode_inferred,
+        cause=divergence.cause if divergence else None,
+        since=divergence.since if divergence else None,
+        error=divergence is not None and divergence.is_error,
+        held_by=status.held_by,
+    )
+
+
+def snapshot(manager: ModeManager) -> list[Row]:
+    """One row per part: systems, then nodes, each sorted by name."""
+    return [row_of(status) for status in sorted(manager.snapshot(), key=lambda s: (s.is_node, s.part))]
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Which parts to show: those whose names match any of ``patterns`` (shell-style: ``*``, ``?``,
+    ``[abc]``; every part when there is none), only the diverging ones if ``diverging``, and no
+    more than ``limit`` of them (``None``: all). Over the limit, the divergences that are errors
+    come first, then the other divergences, then the rest from the top of the hierarchy down; they
+    are shown systems first, then nodes, each by name, as always."""
+
+    patterns: tuple[str, ...] = ()
+    diverging: bool = False
+    limit: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.limit is not None and self.limit < 1:
+            raise ValueError(f"a monitor shows at least one row, not {self.limit}")
+
+    @property
+    def narrowed(self) -> bool:
+        """Whether it may leave parts out."""
+        return bool(self.patterns) or self.diverging or self.limit is not None
+
+    def names(self, parts: Iterable[str]) -> list[str]:
+        """The parts (of ``parts``) whose names match."""
+        if not self.patterns:
+            return list(parts)
+        pattern = re.compile("|".join(f"(?:{fnmatch.translate(p)})" for p in self.patterns))
+        return [part for part in parts if pattern.match(part)]
+
+
+@dataclass(frozen=True)
+class Summary:
+    """How many parts the model has, of which kind, how many diverge (``errors`` of them beyond
+    the grace period and unexplained), and how many rows are shown."""
+
+    parts: int
+    systems: int
+    nodes: int
+    diverging: int
+    errors: int
+    shown: int
+
+    def describe(self) -> str:
+        """``111,111 parts (11,111 systems, 100,000 nodes): 12 diverge, 1 an error; 40 shown``."""
+        diverging = f"{self.diverging:,} diverge" + (f", {self.errors:,} an error" if self.errors == 1 else
+                                                     f", {self.errors:,} errors" if self.errors else "")
+        return (f"{_count(self.parts, 'part')} ({_count(self.systems, 'system')}, {_count(self.nodes, 'node')}): "
+                f"{diverging if self.diverging else 'none diverges'}; {self.shown:,} shown")
+
+
+def _count(number: int, noun: str) -> str:
+    return f"{number:,} {noun}{'' if number == 1 else 's'}"
+
+
+class Rows:
+    """The rows of ``manager``'s parts that ``selection`` shows, kept from the manager's events.
+
+    :meth:`changed` runs in the manager's lock, on any thread (a ROS backend's); :meth:`current`
+    in the owner's, taking the lock while it reads."""
+
+    def __init__(self, manager: ModeManager, selection: Selection) -> None:
+        self._manager = manager
+        self.selection = selection
+        model = manager.model
+        self._systems = sum(isinstance(spec, SystemPart) for spec in model.parts.values())
+        self._nodes = sum(isinstance(spec, NodePart) for spec in model.parts.values())
+        self._children = {name: spec.parts for name, spec in model.parts.items() if isinstance(spec, SystemPart)}
+        ordered = sorted(model.parts, key=lambda name: (isinstance(model.parts[name], NodePart), name))
+        # The candidates in display order; a part's place in it orders any subset.
+        self._candidates = selection.names(ordered)
+        self._place = {part: index for index, part in enumerate(self._candidates)}
+        # The order the rest fills a limit in: the top of the hierarchy first, which sums up the rest.
+        depth = _depths(self._children, model.parts)
+        self._fill = sorted(range(len(self._candidates)), key=lambda index: depth[self._candidates[index]])
+        self._cache: dict[str, Row] = {}
+        self._stale: set[str] = set()
+        with manager.lock:
+            # Every divergence (part -> error?), matched or not: the summary counts them all.
+            self._diverging = {d.part: d.is_error for d in manager.divergences()}
+            self._errors = sum(self._diverging.values())
+
+    def changed(self, event: Event) -> None:
+        """Note what ``event`` changed (call in the manager's lock)."""
+        part = event.part
+        if event.kind is EventKind.DIVERGENCE:
+            was = self._diverging.pop(part, None)
+            if was:
+                self._errors -= 1
+            if event.divergence is not None:
+                error = event.divergence.is_error
+                self._diverging[part] = error
+                self._errors += error
+        elif event.kind is EventKind.HOLD:  # held_by shows on the part and every part below it
+            self._stale.update(parts_below(part, self._children))
+        self._stale.add(part)
+
+    def current(self) -> tuple[list[Row], Summary]:
+        """The rows shown now, in display order, and the summary."""
+        manager = self._manager
+        with manager.lock:
+            cache = self._cache
+            for part in self._stale:
+                cache.pop(part, None)
+            self._stale.clear()
+            shown = self._shown()
+            rows = []
+            for part in shown:
+                row = cache.get(part)
+                if row is None:
+                    row = cache[part] = row_of(manager.status(part))
+                rows.append(row)
+            if len(cache) > 2 * len(rows) + 64:  # rows of parts no longer shown: made again if they are
+                self._cache = {row.part: row for row in rows}
+            summary = Summary(self._systems + self._nodes, self._systems, self._nodes, len(self._diverging),
+                              self._errors, len(rows))
+        return rows, summary
+
+    def _shown(self) -> list[str]:
+        selection, place = self.selection, self._place
+        limit = selection.limit
+        if not selection.diverging and (limit is None or len(self._candidates) <= limit):
+            return self._candidates
+        diverging = sorted((not error, place[part]) for part, error in self._diverging.items() if part in place)
+        picked = [place_ for _, place_ in diverging[:limit]]
+        if not selection.diverging and limit is not None and len(picked) < limit:
+            taken = set(picked)
+            for index in self._fill:
+                if len(picked) >= limit:
+                    break
+                if index not in taken:
+                    picked.append(index)
+        candidates = self._candidates
+        return [candidates[index] for index in sorted(picked)]
+
+
+def _depths(children: dict[str, tuple[str, ...]], parts: Iterable[str]) -> dict[str, int]:
+    """Each part's depth below the top systems (0: a part of no system); the deepest if several."""
+    depth = dict.fromkeys(parts, 0)
+    below = {part for spec in children.values() for part in spec}
+    level = [part for part in depth if part not in below]
+    for height in range(1, len(depth) + 1):
+        level = [part for parent in level for part in children.get(parent, ()) if depth[part] < height]
+        if not level:
+            break
+        for part in level:
+            depth[part] = height
+    return depth
