@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from sm_bt.engine.events import Cause, Event, EventKind
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.snapshots import PartSnapshot
-from sm_bt.model.hierarchy import parts_below
+from sm_bt.model.hierarchy import parts_below, top_down
 from sm_bt.model.types import NodePart, SystemPart
 
 INFERRED = "(*)"
@@ -157,8 +157,8 @@ class Rows:
         self._candidates = selection.names(ordered)
         self._place = {part: index for index, part in enumerate(self._candidates)}
         # The order the rest fills a limit in: the top of the hierarchy first, which sums up the rest.
-        depth = _depths(self._children, model.parts)
-        self._fill = sorted(range(len(self._candidates)), key=lambda index: depth[self._candidates[index]])
+        place = self._place
+        self._fill = [place[part] for part in top_down(model.parts, self._children) if part in place]
         self._cache: dict[str, Row] = {}
         self._stale: set[str] = set()
         with manager.lock:
@@ -219,16 +219,3 @@ class Rows:
         candidates = self._candidates
         return [candidates[index] for index in sorted(picked)]
 
-
-def _depths(children: dict[str, tuple[str, ...]], parts: Iterable[str]) -> dict[str, int]:
-    """Each part's depth below the top systems (0: a part of no system); the deepest if several."""
-    depth = dict.fromkeys(parts, 0)
-    below = {part for spec in children.values() for part in spec}
-    level = [part for part in depth if part not in below]
-    for height in range(1, len(depth) + 1):
-        level = [part for parent in level for part in children.get(parent, ()) if depth[part] < height]
-        if not level:
-            break
-        for part in level:
-            depth[part] = height
-    return depth

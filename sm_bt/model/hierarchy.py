@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 
 from sm_bt.model.diagnostics import Diagnostics
 
@@ -58,3 +58,19 @@ def parts_below(name: str, children: Mapping[str, tuple[str, ...]]) -> tuple[str
         found[current] = None
         frontier.extend(children.get(current, ()))
     return tuple(found)
+
+
+def top_down(parts: Iterable[str], children: Mapping[str, tuple[str, ...]]) -> list[str]:
+    """``parts`` from the top of the hierarchy down: by depth below the systems that are nobody's
+    part (the deepest, for a part of several systems), systems before nodes, then by name. Where there are too many parts
+    to show them all (a monitor, ``/diagnostics``), the first ones sum up the rest."""
+    depth = dict.fromkeys(parts, 0)
+    below = {part for inside in children.values() for part in inside}
+    level = [part for part in depth if part not in below]
+    for height in range(1, len(depth) + 1):  # a bound on the depth: a cycle cannot loop for ever
+        level = [part for parent in level for part in children.get(parent, ()) if depth.get(part, height) < height]
+        if not level:
+            break
+        for part in level:
+            depth[part] = height
+    return sorted(depth, key=lambda part: (depth[part], part not in children, part))

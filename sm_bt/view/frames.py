@@ -9,11 +9,16 @@ A frame is a plain dict (JSON-ready), format 2::
      "visited": [id, ...],                            # the path ticked last, when it changed (always in a key frame)
      "blackboard": {key: value},                      # the visited behaviours' blackboard values that changed
      "modes": [{"part", "kind", "target", "actual", "inferred", "cause", "error", "held_by"}, ...],  # the table
+     "modes_summary": "111,111 parts (...): 3 diverge, 1 an error; 60 shown",  # with "modes", when parts are left out
      "events": [{"time", "kind", "part", "text", ...}, ...]}  # the manager's events since the frame before, if any
 
 A request's events also carry ``request`` (its number), ``done`` and ``ok`` (the timeline draws
 its band); its start, ``plan``: the lines of its preview (:meth:`ModeManager.plan_of`, shown with its
 band and in the list). Parts' actual and target changes are not events here: the ``modes`` table says them.
+The table shows at most :data:`TABLE_ROWS` parts (:mod:`sm_bt.monitor_rows`: errors, then the other
+divergences, then the top of the hierarchy). The list leaves out the divergences a request in
+flight explains (its band shows them), and a frame lists at most :data:`DIVERGENCES_LISTED`
+divergence events, summing up the rest in one line.
 :mod:`sm_bt.view.recording` writes frames to a file, reads them back (format 1, a whole tree in
 every frame, too) and folds a delta into the key frame before it.
 
@@ -34,10 +39,9 @@ import py_trees
 from py_trees.blackboard import Blackboard
 from py_trees.common import Status
 
-from sm_bt.engine.events import Event, EventKind
+from sm_bt.engine.events import Cause, Event, EventKind
 from sm_bt.engine.manager import ModeManager
-from sm_bt.monitor_rows import Row
-from sm_bt.monitor_rows import snapshot as mode_rows
+from sm_bt.monitor_rows import ROW_EVENTS, Row, Rows, Selection
 from sm_bt.tree_snapshot import detail_of, kind_of
 
 Frame = dict[str, Any]
@@ -51,6 +55,8 @@ _LISTED = frozenset({EventKind.DIVERGENCE, EventKind.REQUEST, EventKind.RULE, Ev
 PLAN_LINES = 40
 #: Ticks between looks at the whole tree (its shape, every behaviour, the mode table).
 RESCAN = 200
+#: Parts the mode table shows at most, and divergence events a frame lists at most.
+TABLE_ROWS, DIVERGENCES_LISTED = 8, 8
 
 
 def behaviour_json(behaviour: Behaviour, ident: str, ids: dict[Behaviour, str]) -> dict[str, Any]:
@@ -111,14 +117,36 @@ class FrameMaker:
         self._keys: dict[Behaviour, tuple[str, ...]] = {}  # the blackboard keys each behaviour uses
         self._visited_keys: list[str] = []
         self._blackboard: dict[str, str] = {}
-        self._modes: list[dict[str, Any]] = []
+        self._modes: tuple[list[dict[str, Any]], str | None] = ([], None)
+        self._rows = Rows(manager, Selection(limit=TABLE_ROWS))
+        self._listed: set[str] = set()  # parts whose divergence was listed (so is its end)
+        self._divergences = 0  # divergence events listed for the next frame, and those left out
+        self._unlisted = 0
         self.last: Frame | None = None
         self._subscription = manager.subscribe(self._on_event)
 
     def _on_event(self, event: Event) -> None:
+        if event.kind in ROW_EVENTS:
+            self._rows.changed(event)
         if event.kind not in _LISTED:
             self._table_due = True
             return
+        if event.kind is EventKind.DIVERGENCE:
+            # A request's own progress (in flight) is its band's to show, and so is its end.
+            divergence, listed = event.divergence, self._listed
+            if divergence is not None and divergence.cause is not Cause.IN_FLIGHT:
+                listed.add(event.part)
+            elif event.part in listed and divergence is None:
+                listed.discard(event.part)
+            else:
+                self._table_due = True
+                return
+            with self._events_lock:
+                self._divergences += 1
+                if self._divergences > DIVERGENCES_LISTED:
+                    self._unlisted += 1
+                    self._table_due = True
+                    return
         entry: dict[str, Any] = {"time": round(event.time - self._epoch, 3), "kind": event.kind.value,
                                  "part": event.part, "text": str(event.text) if event.text else _describe(event)}
         request = event.request
@@ -144,8 +172,7 @@ class FrameMaker:
 
     def flush(self) -> None:
         """Send the events not sent yet in a frame of their own (the run is over: no tick will)."""
-        with self._events_lock:
-            events, self._events = self._events, []
+        events = self._take_events()
         if events and self.last is not None:
             self._emit(self._stamped({"events": events}))
 
@@ -167,13 +194,14 @@ class FrameMaker:
             self._last_ticked = ticked
             self._visited_keys = self._keys_of(ticked)
             frame["visited"] = [ids[behaviour] for behaviour in ticked]
+        events = self._take_events()
         with self._events_lock:
-            events, self._events = self._events, []
             due, self._table_due = self._table_due or rescan, False
         if due:
-            modes = _modes(self._manager)
+            modes = self._table()
             if modes != self._modes:
-                self._modes = frame["modes"] = modes
+                self._modes = modes
+                self._put_table(frame)
         if events:
             frame["events"] = events
         if frame or rescan:  # values alone make no frame: whatever wrote them mostly changed too
@@ -182,6 +210,26 @@ class FrameMaker:
                 frame["blackboard"] = blackboard
         if frame:
             self._emit(self._stamped(frame))
+
+    def _take_events(self) -> list[dict[str, Any]]:
+        """The events for the next frame, the divergences left out summed up in one."""
+        with self._events_lock:
+            events, self._events = self._events, []
+            unlisted, self._unlisted, self._divergences = self._unlisted, 0, 0
+        if unlisted:
+            events.append({"time": round(self._manager.clock.now() - self._epoch, 3), "kind": "divergence",
+                           "part": "", "text": f"… and {unlisted:,} more divergences started or ended "
+                                               "(the table shows the parts that diverge)"})
+        return events
+
+    def _table(self) -> tuple[list[dict[str, Any]], str | None]:
+        rows, summary = self._rows.current()
+        return [_mode_json(row) for row in rows], summary.describe() if summary.shown < summary.parts else None
+
+    def _put_table(self, frame: Frame) -> None:
+        frame["modes"], summary = self._modes
+        if summary is not None:
+            frame["modes_summary"] = summary
 
     def _stamped(self, frame: Frame) -> Frame:
         return {"tick": self._ticks, "time": round(self._manager.clock.now() - self._epoch, 3),
@@ -256,13 +304,13 @@ class FrameMaker:
         self._visited_keys = self._keys_of(ticked)
         self._blackboard = {}
         self._blackboard_changes()
+        events = self._take_events()
         with self._events_lock:
-            events, self._events = self._events, []
             self._table_due = False
-        self._modes = _modes(self._manager)
+        self._modes = self._table()
         frame = {"key": True, "behaviours": {ident: dict(json) for ident, json in self._json.items()},
-                 "visited": [self._ids[b] for b in ticked], "blackboard": dict(self._blackboard),
-                 "modes": self._modes}
+                 "visited": [self._ids[b] for b in ticked], "blackboard": dict(self._blackboard)}
+        self._put_table(frame)
         if events:
             frame["events"] = events
         return self._stamped(frame)
@@ -295,8 +343,6 @@ def _describe(event: Event) -> str:
     return f"{event.kind.value} {event.part}"
 
 
-def _modes(manager: ModeManager) -> list[dict[str, Any]]:
-    return [_mode_json(row) for row in mode_rows(manager)]
 
 
 def _mode_json(row: Row) -> dict[str, Any]:

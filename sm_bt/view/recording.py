@@ -151,6 +151,9 @@ def fold(key: Frame, frame: Frame) -> Frame:
                      "behaviours": behaviours, "visited": frame.get("visited", key["visited"]),
                      "blackboard": {**key.get("blackboard", {}), **frame.get("blackboard", {})},
                      "modes": frame.get("modes", key["modes"])}
+    summary = frame.get("modes_summary") if "modes" in frame else key.get("modes_summary")
+    if summary is not None:  # it travels with the table it sums up
+        folded["modes_summary"] = summary
     if frame.get("events"):
         folded["events"] = frame["events"]
     return folded

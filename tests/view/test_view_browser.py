@@ -391,3 +391,65 @@ def test_who_holds_a_part_is_a_column_of_the_modes_table_while_one_does(tmp_path
     assert held.count('<td class="held">rule degrade_from_normal (priority 100)</td>') == 5  # pilot and its 4 nodes
     assert '<table id="modes" class="">' in before or '<table id="modes">' in before
     assert '<td class="held">rule' not in before
+
+
+def _nested_model_text(nodes: int, fanout: int = 10) -> str:
+    """``nodes`` nodes (modes __DEFAULT__ and FAST) in systems of ``fanout``, nested up to ``root``."""
+    names = [f"n{i}" for i in range(nodes)]
+    text, level, depth = [], names, 0
+    for name in names:
+        text.append(f"{name}:\n  ros__parameters:\n    type: node\n    modes:\n      __DEFAULT__:\n"
+                    "        ros__parameters:\n          speed: 1.0\n      FAST:\n        ros__parameters:\n"
+                    "          speed: 2.0\n")
+    while len(level) > 1:
+        depth += 1
+        groups = [level[i:i + fanout] for i in range(0, len(level), fanout)]
+        level = ["root"] if len(groups) == 1 else [f"s{depth}_{i}" for i in range(len(groups))]
+        for system, group in zip(level, groups, strict=True):
+            parts = "".join(f"      {part}\n" for part in group)
+            modes = "".join(f"      {mode}:\n" + "".join(f"        {part}: active.{mode}\n" for part in group)
+                            for mode in ("__DEFAULT__", "FAST"))
+            text.append(f"{system}:\n  ros__parameters:\n    type: system\n    parts:\n{parts}    modes:\n{modes}")
+    return "".join(text)
+
+
+def test_a_model_of_thousands_of_parts_shows_what_matters_and_how_many_there_are(tmp_path: Path) -> None:
+    """2,000 nodes: the table shows the parts that diverge, then the top of the hierarchy, with a
+    line that counts them all; the list leaves out what the requests explain and sums up the
+    divergences beyond a frame's share; nothing is cut at 1280x800."""
+    import py_trees
+
+    from sm_bt.behaviours import ChangeMode
+    from sm_bt.model.loader import load_model_text
+    from sm_bt.sim import SimulatedSystem
+
+    system = SimulatedSystem(load_model_text(_nested_model_text(2000), "nested-2000.yaml"), rules=False,
+                             recovery=False)
+    root = py_trees.composites.Sequence("Mission", memory=True, children=[
+        ChangeMode("Bring up", part="root", mode="__DEFAULT__"), ChangeMode("Go fast", part="root", mode="FAST"),
+        py_trees.behaviours.Running("Patrol")])
+    tree = py_trees.trees.BehaviourTree(root)
+    tree.setup(manager=system.manager)
+    path = tmp_path / "large.jsonl"
+    view = attach_view(tree, system.manager, port=None, record=path)
+    for tick in range(60):
+        if tick == 40:  # a fault of 60 nodes, and of the 9 systems above them
+            for node in range(1200, 1260):
+                system.backend.set_parameter(f"n{node}", "speed", 9.0)
+        tree.tick()
+        system.run(0.1)
+    view.close()
+    frames = read_recording(path)
+    assert max(len(frame.get("modes", ())) for frame in frames) <= 8
+    assert any("more divergences started or ended" in event["text"]
+               for frame in frames for event in frame.get("events", ()))
+    server = ViewServer(port=0, frames=frames)
+    try:
+        dom = _browse(f"{server.url}?check", screenshot=SHOTS / "large-model-1280x800.png")
+    finally:
+        server.close()
+    _assert_nothing_cut(_report(dom), "2,000 nodes")
+    summary = re.search(r'<p id="modes-summary">([^<]*)</p>', dom)
+    assert summary and summary.group(1) == "2,223 parts (223 systems, 2,000 nodes): 69 diverge; 8 shown", summary
+    rows = re.findall(r'<tr data-part="([^"]+)"', dom)
+    assert rows == ["root", "s1_120", "s1_121", "s1_122", "s1_123", "s1_124", "s1_125", "s2_12"], rows

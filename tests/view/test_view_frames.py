@@ -14,11 +14,18 @@ import py_trees
 import pytest
 from rich.console import Console
 
+from sm_bt.engine.manager import ModeManager
+from sm_bt.monitor_rows import snapshot
 from sm_bt.trees.pilot.demo import Demo, Options
 from sm_bt.view import read_recording
-from sm_bt.view.frames import Frame, FrameMaker, _modes, behaviour_json
+from sm_bt.view.frames import Frame, FrameMaker, _mode_json, behaviour_json
 from sm_bt.view.recording import HEADER, VERSION, fold
 
+
+
+def table(manager: ModeManager) -> list[dict[str, Any]]:
+    """Every part's row (the pilot has fewer parts than the view's table shows)."""
+    return [_mode_json(row) for row in snapshot(manager)]
 
 def _demo(**options: Any) -> Demo:
     return Demo(Options(speed=0.0, quiet=True, **options), Console(file=io.StringIO(), width=120))
@@ -63,7 +70,7 @@ def test_frames_folded_are_the_whole_tree_table_and_path_at_every_tick() -> None
         ticks["all"] += 1
         assert state["behaviours"] == _whole(demo.tree), f"tick {ticks['all']}"
         assert set(state["visited"]) == {str(ident) for ident in demo.snapshot.visited}
-        assert state["modes"] == _modes(demo.manager), f"the table at tick {ticks['all']}"
+        assert state["modes"] == table(demo.manager), f"the table at tick {ticks['all']}"
         if frame is not None:  # values go out with the frames that something else made
             for key in demo.snapshot.visited_blackboard_keys:
                 stored = py_trees.blackboard.Blackboard.storage.get(key, "-")
@@ -122,7 +129,7 @@ def test_a_recording_of_the_demo_is_small_and_reads_back(tmp_path: Path) -> None
     for frame in frames[1:]:
         whole = fold(whole, frame)
     assert whole["behaviours"] == _whole(demo.tree)
-    assert whole["modes"] == _modes(demo.manager)
+    assert whole["modes"] == table(demo.manager)
 
 
 def test_a_format_1_recording_reads_as_format_2(tmp_path: Path) -> None:

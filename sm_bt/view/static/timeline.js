@@ -2,7 +2,8 @@
 // requests (from asked to answered), a time axis, and a cursor at the tick shown. Click or drag
 // on it to show that moment; the wheel zooms into the time around the pointer, a double-click
 // shows the whole run again. Built as frames come (segments per part), drawn whole each time:
-// a few hundred SVG elements.
+// a few hundred SVG elements. The bands are those of the parts in the table now; a part that left
+// the table (a large model's table shows a few of its parts) has a gap in its band while it was out.
 "use strict";
 
 var timeline = (function () {
@@ -11,7 +12,7 @@ var timeline = (function () {
                        unknown: "#37474f"};
   var ROW = 22, BAND = 13, AXIS = 22;
   var svg = document.getElementById("bands");
-  var parts = [];        // in the table's order
+  var parts = [];        // the table's, in its order: the bands drawn
   var segments = {};     // part -> [{from, actual, error}]
   var requests = {};     // request number -> {part, from, to, ok, text}
   var marks = [];        // failed expectations of a scenario: {time, text}
@@ -24,13 +25,21 @@ var timeline = (function () {
   function add(frame, modes) {
     end = Math.max(end, frame.time);
     if (frame.modes) {
+      var shown = {};
       modes.forEach(function (row) {
-        if (parts.indexOf(row.part) < 0) { parts.push(row.part); segments[row.part] = []; }
-        var list = segments[row.part], key = row.actual + (row.error ? "!" : "");
+        shown[row.part] = true;
+        var list = segments[row.part] = segments[row.part] || [], key = row.actual + (row.error ? "!" : "");
         if (!list.length || list[list.length - 1].key !== key) {
           list.push({from: frame.time, key: key, actual: row.actual, error: row.error});
         }
       });
+      parts.forEach(function (part) {  // out of the table: what it does from now on is not known here
+        var list = segments[part];
+        if (!shown[part] && list.length && list[list.length - 1].actual !== null) {
+          list.push({from: frame.time, key: "", actual: null, error: false});
+        }
+      });
+      parts = modes.map(function (row) { return row.part; });
     }
     (frame.events || []).forEach(function (event) {
       if (event.kind === "expectation") { marks.push({time: event.time, text: event.text}); }
@@ -89,7 +98,7 @@ var timeline = (function () {
       svg.appendChild(name);
       var list = segments[part];
       list.forEach(function (segment, i) {
-        var box = span(segment.from, i + 1 < list.length ? list[i + 1].from : end, 1);
+        var box = segment.actual === null ? null : span(segment.from, i + 1 < list.length ? list[i + 1].from : end, 1);
         if (!box) { return; }
         var state = segment.actual.split(".")[0], mode = segment.actual.split(".")[1];
         svg.appendChild(el("rect", {x: box.x, y: y, width: box.width, height: BAND,

@@ -31,6 +31,7 @@ function advance(state, frame) {
     next.visited = frame.visited;
     next.blackboard = frame.blackboard || {};
     next.modes = frame.modes;
+    next.modesSummary = frame.modes_summary;
     return next;
   }
   next.root = state.root;
@@ -42,6 +43,7 @@ function advance(state, frame) {
   next.visited = frame.visited || state.visited;
   next.blackboard = frame.blackboard ? Object.assign({}, state.blackboard, frame.blackboard) : state.blackboard;
   next.modes = frame.modes || state.modes;
+  next.modesSummary = frame.modes ? frame.modes_summary : state.modesSummary;  // it travels with its table
   return next;
 }
 
@@ -108,6 +110,9 @@ function showModes(state) {
   document.getElementById("modes").classList.toggle("holding", state.modes.some(function (row) {
     return Boolean(row.held_by);
   }));
+  var summary = document.getElementById("modes-summary");  // how many parts there are, when some are left out
+  summary.textContent = state.modesSummary || "";
+  summary.hidden = !state.modesSummary;
   var status = document.getElementById("status");
   status.textContent = state.status;
   status.className = "status " + state.status;
