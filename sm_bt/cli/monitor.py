@@ -28,6 +28,7 @@ from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.diagnostics import did_you_mean
+from sm_bt.model.gc_tuning import freeze_long_lived
 from sm_bt.model.types import Model
 from sm_bt.monitor import Monitor, Selection, terminal_console
 from sm_bt.sim import SimulatedSystem
@@ -141,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
             system = stack.enter_context(SimulatedSystem(model, record=False))
             manager = system.manager
             advance = _paced(system.run, args.speed)
+        freeze_long_lived()  # the model and the manager live as long as the process (sm_bt.model.gc_tuning)
         output = sys.stdout if args.json else terminal_console()
         monitor = Monitor(manager, output, title=args.model, epoch=manager.clock.now(), changes=args.changes,
                           selection=Selection(tuple(args.parts), args.diverging, _rows(args, output)))

@@ -23,21 +23,29 @@ per burst: aggregators keep the last status per name; a request's failure at onc
 every ``period`` seconds, as ``diagnostic_updater`` does, so that a late joiner and the aggregators'
 staleness checks see it. While nobody subscribes, nothing is built (a full message of 20 nodes is
 a thousand small Python objects, made under the manager's lock).
+
+A model of more than ``limit`` (1,000) parts is published in pages (:class:`Paging`): each
+message carries at most ``limit`` statuses. Every period's message has the parts at the top of the
+hierarchy, every part that diverges, and the next page of the others in turn, so that each part
+is published at least once per :attr:`Paging.cycle` periods; a status named ``"{manager node}:
+summary"`` (no ``hardware_id``) counts the parts and the divergences. A burst of changes larger than
+a message goes out over several gatherings, errors and the top of the hierarchy first.
 """
 
 from __future__ import annotations
 
+import heapq
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from sm_bt.engine.clock import Clock, TimerHandle
-from sm_bt.engine.events import Event, EventKind, Subscription
+from sm_bt.engine.events import Divergence, Event, EventKind, Subscription
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
-from sm_bt.model.hierarchy import parts_below
+from sm_bt.model.hierarchy import parts_below, top_down
 from sm_bt.model.types import NodePart, SystemPart
 from sm_bt.ros import removable
 
@@ -50,6 +58,61 @@ PERIOD = 1.0
 #: Changes are gathered this long before they go out: one message for a change's burst of events,
 #: built after the change rather than in the middle of it (its threads also carry the answers).
 GATHER = 0.1
+#: The most statuses in one message: a larger model is published in pages.
+LIMIT = 1000
+
+
+class Paging:
+    """Which parts each message carries, for a model of ``parts`` (``children``: each system's
+    parts) when there are more than ``limit``: see the module."""
+
+    def __init__(self, parts: Iterable[str], children: Mapping[str, tuple[str, ...]], limit: int = LIMIT) -> None:
+        if limit < 2:
+            raise ValueError(f"a page holds at least two statuses, not {limit}")
+        order = top_down(parts, children)
+        self.limit = limit
+        self.paged = len(order) > limit
+        self._rank = {part: index for index, part in enumerate(order)}
+        # A quarter for the top of the hierarchy, up to half for divergences, the rest for a page.
+        top = limit // 4 if self.paged else len(order)
+        self._top, self._others = order[:top], order[top:]
+        self._most_diverging = limit // 2
+        self._cursor = 0
+
+    @property
+    def cycle(self) -> int:
+        """Periods within which every part is published at least once (with divergences filling
+        their share of every message)."""
+        if not self.paged:
+            return 1
+        page = self.limit - len(self._top) - self._most_diverging
+        return -(-len(self._others) // page)
+
+    def periodic(self, diverging: Iterable[str]) -> list[str]:
+        """The parts of the next periodic message (``diverging``: the parts that diverge now)."""
+        if not self.paged:
+            return list(self._top)
+        top = set(self._top)
+        extra = heapq.nsmallest(self._most_diverging, (part for part in set(diverging) if part not in top),
+                                key=self._rank.__getitem__)
+        chosen = top.union(extra)
+        others, page = self._others, []
+        for _ in range(len(others)):
+            if len(chosen) + len(page) >= self.limit:
+                break
+            part = others[self._cursor]
+            self._cursor = (self._cursor + 1) % len(others)
+            if part not in chosen:
+                page.append(part)
+        return sorted((*chosen, *page), key=self._rank.__getitem__)
+
+    def burst(self, changed: set[str], urgent: set[str]) -> tuple[list[str], set[str]]:
+        """The changed parts to publish now, ``urgent`` ones first, and those left for the next gathering."""
+        rank = self._rank
+        if len(changed) <= self.limit:
+            return sorted(changed, key=rank.__getitem__), set()
+        now = heapq.nsmallest(self.limit, changed, key=lambda part: (part not in urgent, rank[part]))
+        return sorted(now, key=rank.__getitem__), changed.difference(now)
 
 
 @dataclass(frozen=True)
@@ -128,12 +191,16 @@ def part_diagnostic(manager: ModeManager, part: str, last: Request | None, link:
     return PartDiagnostic(part, level, message, tuple(values))
 
 
+def _count(number: int, noun: str) -> str:
+    return f"{number:,} {noun}{'' if number == 1 else 's'}"
+
+
 class DiagnosticsPublisher:
     """Publish ``manager``'s parts on ``/diagnostics`` from ``node``, on change and every ``period``
     seconds (timed by ``clock``); ``link(node)`` says how a node answers, if the backend knows."""
 
     def __init__(self, node: Any, manager: ModeManager, clock: Clock, *, period: float = PERIOD,
-                 link: Callable[[str], Any] | None = None, topic: str = "/diagnostics") -> None:
+                 link: Callable[[str], Any] | None = None, topic: str = "/diagnostics", limit: int = LIMIT) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
 
         self._node = node
@@ -146,6 +213,10 @@ class DiagnosticsPublisher:
         self._lock = threading.Lock()
         self._last: dict[str, Request] = {}
         self._dirty: set[str] = set()
+        self._urgent: set[str] = set()  # of the dirty parts, those to publish first (failures)
+        model = manager.model
+        self._children = {name: part.parts for name, part in model.parts.items() if isinstance(part, SystemPart)}
+        self._paging = Paging(model.parts, self._children, limit)
         self._flush: TimerHandle | None = None
         self._closed = False
         with manager.lock:
@@ -175,9 +246,7 @@ class DiagnosticsPublisher:
         elif event.kind in (EventKind.ACTUAL, EventKind.TARGET, EventKind.DIVERGENCE, EventKind.FAILED):
             self._changed(event.part)
         elif event.kind is EventKind.HOLD:  # held_by changes on the part and every part below it
-            model = self._manager.model
-            children = {name: part.parts for name, part in model.parts.items() if isinstance(part, SystemPart)}
-            for name in (event.part, *parts_below(event.part, children)):
+            for name in (event.part, *parts_below(event.part, self._children)):
                 self._changed(name)
 
     def _note(self, part: str, request: Request) -> None:
@@ -193,6 +262,8 @@ class DiagnosticsPublisher:
             if self._closed or part not in self._manager.model.parts or not self._publisher.get_subscription_count():
                 return
             self._dirty.add(part)
+            if now:
+                self._urgent.add(part)
             if now and self._flush is not None:
                 self._flush.cancel()
                 self._flush = None
@@ -203,7 +274,10 @@ class DiagnosticsPublisher:
 
     def _publish_dirty(self) -> None:
         with self._lock:
-            parts, self._dirty, self._flush = sorted(self._dirty), set(), None
+            parts, self._dirty = self._paging.burst(self._dirty, self._urgent)
+            self._urgent.intersection_update(self._dirty)
+            # What did not fit goes with the next gathering.
+            self._flush = self._clock.call_later(GATHER, self._publish_dirty) if self._dirty else None
         self._publish(parts)
 
     def _publish_all(self) -> None:
@@ -211,7 +285,25 @@ class DiagnosticsPublisher:
             if self._closed:
                 return
             self._timer = self._clock.call_later(self._period, self._publish_all)
-        self._publish(list(self._manager.model.parts))
+        if not self._paging.paged:
+            self._publish(list(self._manager.model.parts))
+        elif self._publisher.get_subscription_count():
+            divergences = self._manager.divergences()
+            self._publish(self._paging.periodic(d.part for d in divergences), self._summary(divergences))
+
+    def _summary(self, divergences: list[Divergence]) -> PartDiagnostic:
+        """The status that counts the parts of a paged model and their divergences."""
+        model, errors = self._manager.model, sum(d.is_error for d in divergences)
+        systems = len(self._children)
+        level = ERROR if errors else WARN if divergences else OK
+        every = self._paging.cycle * self._period
+        message = (f"{_count(len(model.parts), 'part')} ({_count(systems, 'system')}, "
+                   f"{_count(len(model.parts) - systems, 'node')}): "
+                   f"{len(divergences):,} diverge, {errors:,} beyond their grace period; {self._paging.limit:,} "
+                   f"statuses a message, each part at least every {every:g} s")
+        return PartDiagnostic("", level, message, (("parts", str(len(model.parts))),
+                                                  ("diverging", str(len(divergences))), ("errors", str(errors)),
+                                                  ("every_part_within_s", f"{every:g}")))
 
     def statuses(self, parts: list[str]) -> list[PartDiagnostic]:
         manager = self._manager
@@ -228,7 +320,7 @@ class DiagnosticsPublisher:
         except KeyError:
             return None
 
-    def _publish(self, parts: list[str]) -> None:
+    def _publish(self, parts: list[str], summary: PartDiagnostic | None = None) -> None:
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
         if not parts or self._closed or not self._publisher.get_subscription_count():
@@ -236,9 +328,10 @@ class DiagnosticsPublisher:
         message = DiagnosticArray()
         message.header.stamp = self._node.get_clock().now().to_msg()
         message.status = [
-            DiagnosticStatus(level=bytes([status.level]), name=f"{self._name}: {status.part}", message=status.message,
-                             hardware_id=status.part, values=[KeyValue(key=k, value=v) for k, v in status.values])
-            for status in self.statuses(parts)]
+            DiagnosticStatus(level=bytes([status.level]), name=f"{self._name}: {status.part or 'summary'}",
+                             message=status.message, hardware_id=status.part,
+                             values=[KeyValue(key=k, value=v) for k, v in status.values])
+            for status in ([summary] if summary is not None else []) + self.statuses(parts)]
         try:
             self._publisher.publish(message)
         except Exception:  # the node is going away (shutdown): nothing to tell anyone any more

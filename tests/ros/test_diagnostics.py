@@ -11,7 +11,7 @@ from model_files import bundled
 
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.engine.requests import Request
-from sm_bt.ros.diagnostics import ERROR, OK, STALE, WARN, PartDiagnostic, part_diagnostic
+from sm_bt.ros.diagnostics import ERROR, OK, STALE, WARN, Paging, PartDiagnostic, part_diagnostic
 from sm_bt.sim import SimulatedSystem
 
 
@@ -121,3 +121,50 @@ def test_a_node_back_from_out_of_reach_says_how_it_came_back(caplog: pytest.LogC
     rig.run(0.5)
     back = rig.manager.last_return("amcl")
     assert back is not None and not back.changed and back.describe().startswith("inactive (back after ")
+
+
+# -- a model larger than a message ---------------------------------------------------------------
+
+
+def flat(count: int) -> tuple[list[str], dict[str, tuple[str, ...]]]:
+    nodes = [f"n{i:03d}" for i in range(count)]
+    return ["robot", *nodes], {"robot": tuple(nodes)}
+
+
+def test_a_model_within_the_limit_is_published_whole_every_period() -> None:
+    parts, children = flat(9)
+    paging = Paging(parts, children, limit=10)
+    assert not paging.paged and paging.cycle == 1
+    assert paging.periodic(["n003"]) == paging.periodic([]) == parts
+    assert paging.burst({"n004", "robot"}, set()) == (["robot", "n004"], set())
+
+
+def test_pages_carry_the_top_the_divergences_and_every_other_part_in_turn() -> None:
+    parts, children = flat(100)
+    paging = Paging(parts, children, limit=10)  # the top 2, up to 5 divergences, at least 3 more in turn
+    assert paging.paged and paging.cycle == 33
+    seen: set[str] = set()
+    for period in range(paging.cycle):
+        diverging = [f"n{i:03d}" for i in range(90, 100)] if period % 2 else ["n050"]
+        message = paging.periodic(diverging)
+        assert len(message) == 10 and message[:2] == ["robot", "n000"]
+        assert set(diverging[:5]) <= set(message)  # the divergences from the top down, up to half of it
+        seen.update(message)
+    assert seen == set(parts)
+
+
+def test_a_burst_larger_than_a_message_goes_out_over_several_urgent_ones_first() -> None:
+    parts, children = flat(100)
+    paging = Paging(parts, children, limit=10)
+    changed = set(parts)
+    now, left = paging.burst(changed, {"n099"})
+    assert now == ["robot", "n000", "n001", "n002", "n003", "n004", "n005", "n006", "n007", "n099"]
+    assert left == changed - set(now)
+    sent = set(now)
+    while left:
+        now, left = paging.burst(left, set())
+        assert len(now) <= 10 and not sent & set(now)
+        sent.update(now)
+    assert sent == set(parts)
+    with pytest.raises(ValueError, match="at least two"):
+        Paging(parts, children, limit=1)

@@ -332,3 +332,34 @@ def test_diagnostics_are_built_only_for_a_reader_who_gets_every_part_within_the_
         assert built
     finally:
         ros.close()
+
+
+def test_a_model_larger_than_a_diagnostics_message_is_published_in_pages_with_a_summary(
+        ros_context: RosContext) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from sm_bt.ros.diagnostics import DiagnosticsPublisher
+
+    received: list[Any] = []
+    ros_context.node.create_subscription(DiagnosticArray, "/diagnostics_paged",
+                                         lambda message: received.append(message), 100)
+    ros = RosRuntime(bundled("pilot"), node_name="sm_bt_paged_diagnostics_test", serve=False,
+                     manager_options={"rules": False, "recovery": False})
+    publisher = DiagnosticsPublisher(ros.node, ros.manager, ros.clock, period=0.2, limit=4,
+                                     topic="/diagnostics_paged")
+    try:  # 5 parts, 4 a message: pilot in each (the top quarter), the nodes in turn (no divergence: nothing asked)
+        parts = set(ros.manager.model.parts)
+        wait_until(lambda: parts <= {s.hardware_id for m in list(received) for s in m.status}, 10.0,
+                   "not every part within the cycle")
+        periodic = [m for m in list(received) if m.status and m.status[0].name.endswith(": summary")]
+        assert periodic, "a summary heads each periodic message"
+        for message in periodic:
+            summary, *statuses = message.status
+            assert len(statuses) == 4 and statuses[0].hardware_id == "pilot"
+            values = {kv.key: kv.value for kv in summary.values}
+            assert (values["parts"], values["diverging"], values["errors"]) == ("5", "0", "0")
+            assert summary.message.startswith("5 parts (1 system, 4 nodes): 0 diverge")
+        assert all(len([s for s in m.status if s.hardware_id]) <= 4 for m in list(received))
+    finally:
+        publisher.close()
+        ros.close()
