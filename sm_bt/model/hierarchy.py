@@ -62,8 +62,9 @@ def parts_below(name: str, children: Mapping[str, tuple[str, ...]]) -> tuple[str
 
 def top_down(parts: Iterable[str], children: Mapping[str, tuple[str, ...]]) -> list[str]:
     """``parts`` from the top of the hierarchy down: by depth below the systems that are nobody's
-    part (the deepest, for a part of several systems), systems before nodes, then by name. Where there are too many parts
-    to show them all (a monitor, ``/diagnostics``), the first ones sum up the rest."""
+    part (the deepest, for a part of several systems), systems before nodes, then by name. Where
+    there are too many parts to show them all (a monitor, ``/diagnostics``), the first ones sum up
+    the rest."""
     depth = dict.fromkeys(parts, 0)
     below = {part for inside in children.values() for part in inside}
     level = [part for part in depth if part not in below]

@@ -22,7 +22,6 @@ from sm_bt.view.frames import Frame, FrameMaker, _mode_json, behaviour_json
 from sm_bt.view.recording import HEADER, VERSION, fold
 
 
-
 def table(manager: ModeManager) -> list[dict[str, Any]]:
     """Every part's row (the pilot has fewer parts than the view's table shows)."""
     return [_mode_json(row) for row in snapshot(manager)]
