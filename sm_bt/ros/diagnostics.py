@@ -96,7 +96,8 @@ class Paging:
         extra = heapq.nsmallest(self._most_diverging, (part for part in set(diverging) if part not in top),
                                 key=self._rank.__getitem__)
         chosen = top.union(extra)
-        others, page = self._others, []
+        others = self._others
+        page: list[str] = []
         for _ in range(len(others)):
             if len(chosen) + len(page) >= self.limit:
                 break
