@@ -50,6 +50,8 @@ ADMISSION_GOAL_US = 10.0
 PREVIEW_GOAL_MS = {1000: 5.0, 10_000: 50.0}
 CONSTRUCTION_GOAL = {10_000: 2.0}
 EVENT_GOAL_US = {10_000: 50.0}
+#: The manager's part of a fault at 10,000 nodes (issue 35), microseconds.
+FAULT_GOAL_US = {10_000: 30.0}
 FULL_OVER_EVENT_GOAL = 100.0
 GROWTH_GOAL = 1.5
 FAULT_EVENTS, QUICK_FAULT_EVENTS = 2000, 200
@@ -292,9 +294,9 @@ def run(quick: bool) -> list[Figure]:
                   "p90_us": round(sorted(got["change_events"])[int(0.9 * len(got["change_events"]))] * 1e6, 1)}
         figures.append(Figure("P3", f"node event during a mode change, median, N={nodes}", change, "µs",
                               EVENT_GOAL_US.get(nodes), details=events))
+        flipped = {**common, "events": len(got["fault_events"]), "parts_flipped": 1 + _depth(nodes)}
         figures.append(Figure("P3", f"fault event flipping a node and its systems, median, N={nodes}", fault, "µs",
-                              details={**common, "events": len(got["fault_events"]),
-                                       "parts_flipped": 1 + _depth(nodes)}))
+                              FAULT_GOAL_US.get(nodes), details=flipped))
         if nodes == sizes[-1]:
             full = got["full_inference"] * 1e6
             for label, value in (("node event during a mode change", change), ("fault event", fault)):
