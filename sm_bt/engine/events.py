@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import enum
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import NamedTuple
 
 from sm_bt.engine.inference import Actual
@@ -123,6 +123,29 @@ class Outbox:
     def __init__(self) -> None:
         self._queue: deque[list[Event | None]] = deque()
         self._actual: dict[str, list[Event | None]] = {}  # part -> its untold ACTUAL event's slot
+        # What the subscribers want: an event nobody wants is not made (a change of 100,000 nodes
+        # is half a million of them).
+        self._everywhere: frozenset[EventKind] = frozenset()  # kinds wanted of every part
+        self._of_part: dict[str, frozenset[EventKind]] = {}  # and of some parts
+
+    def wanted(self, kind: EventKind, part: str) -> bool:
+        """Whether a subscriber wants events of ``kind`` about ``part``."""
+        return kind in self._everywhere or kind in self._of_part.get(part, ())
+
+    def interest(self, subscriptions: Iterable[Subscription]) -> None:
+        """Take note of what ``subscriptions`` want (whenever they change)."""
+        every = frozenset(EventKind)
+        everywhere: set[EventKind] = set()
+        of_part: dict[str, set[EventKind]] = {}
+        for subscription in subscriptions:
+            kinds = every if subscription.kinds is None else subscription.kinds
+            if subscription.parts is None:
+                everywhere |= kinds
+            else:
+                for part in subscription.parts:
+                    of_part.setdefault(part, set()).update(kinds)
+        self._everywhere = frozenset(everywhere)
+        self._of_part = {part: frozenset(kinds - everywhere) for part, kinds in of_part.items() if kinds - everywhere}
 
     def put(self, event: Event) -> None:
         self._queue.append([event])

@@ -1,9 +1,9 @@
 """The manager's ledger: every part's target and inferred actual, and the events their changes make.
 
 Targets are written here only (:meth:`Ledger.set_target`), and inference's changes are applied
-here only (:meth:`Ledger.apply`): each one becomes an event in the outbox, marks the divergences
-it may change (the part's, and those of the systems whose rules watch it) and lets the requests
-waiting for the part's actual look again.
+here only (:meth:`Ledger.apply`): each one becomes an event in the outbox (if an observer wants
+it), marks the divergences it may change (the part's, and those of the systems whose rules watch
+it) and lets the requests waiting for the part's actual look again.
 """
 
 from __future__ import annotations
@@ -47,10 +47,11 @@ class Ledger:
             self._last_mode[part] = target.mode
         if self.inference.target(part) == target:
             return
-        before = self.inference.actual(part)
-        if transition is None and target is not None:
-            transition = first_transition(before.state, target.state)
-        self.emit(EventKind.TARGET, part, target=target, previous=before, transition=transition)
+        if self._outbox.wanted(EventKind.TARGET, part):
+            before = self.inference.actual(part)
+            if transition is None and target is not None:
+                transition = first_transition(before.state, target.state)
+            self.emit(EventKind.TARGET, part, target=target, previous=before, transition=transition)
         self.divergences.touch(part)
         self.apply(self.inference.set_target(part, target))
 
@@ -58,7 +59,8 @@ class Ledger:
         now = self._clock.now()
         outbox, touch, watchers, waiting = self._outbox, self.divergences.touch, self._watchers, self.waiting
         for part, (old, new) in changes.items():
-            outbox.actual(Event(EventKind.ACTUAL, part, now, "", new, None, None, None, old))
+            if outbox.wanted(EventKind.ACTUAL, part):
+                outbox.actual(Event(EventKind.ACTUAL, part, now, "", new, None, None, None, old))
             touch(part)
             for watcher in watchers.get(part, ()):
                 touch(watcher)
@@ -68,9 +70,15 @@ class Ledger:
     def emit(self, kind: EventKind, part: str, text: str = "", *, target: StateMode | None = None,
              divergence: Divergence | None = None, request: Request | None = None,
              previous: Actual | None = None, transition: Transition | None = None) -> None:
+        if not self._outbox.wanted(kind, part):
+            return
         actual = self.inference.actual(part) if part in self.model.parts else None
         self._outbox.put(Event(kind, part, self._clock.now(), text, actual, target, divergence, request, previous,
                                transition))
+
+    def wants(self, kind: EventKind, part: str) -> bool:
+        """Whether an observer wants such an event (else it need not be made)."""
+        return self._outbox.wanted(kind, part)
 
     def put(self, event: Event) -> None:
         self._outbox.put(event)

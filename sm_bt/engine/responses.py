@@ -61,15 +61,17 @@ class Responses:
         if new is None:
             self._reported.discard(part)
             self._reactions.back_on_target(part, now)
-            self._ledger.put(Event(EventKind.DIVERGENCE, part, now, "", self._inference.actual(part),
-                                   self._inference.target(part)))
+            if self._ledger.wants(EventKind.DIVERGENCE, part):
+                self._ledger.put(Event(EventKind.DIVERGENCE, part, now, "", self._inference.actual(part),
+                                       self._inference.target(part)))
             return
         if new.is_error and part not in self._reported:  # once per divergence, not per attempt
             self._reported.add(part)
             why = f": {new.reason}" if new.reason else ""
             log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s%s).",
                         part, new.target, new.actual, new.cause.value, why)
-        self._ledger.put(Event(EventKind.DIVERGENCE, part, now, "", new.actual, None, new))
+        if self._ledger.wants(EventKind.DIVERGENCE, part):
+            self._ledger.put(Event(EventKind.DIVERGENCE, part, now, "", new.actual, None, new))
 
     def react(self, faults: list[Divergence]) -> list[Reaction]:
         """The requests rules and recovery ask for, given ``faults`` (a give-up is noted and told here)."""

@@ -93,11 +93,13 @@ class Serialiser:
         subscription = Subscription(callback, parts, None if kinds is None else frozenset(kinds), self._unsubscribe)
         with self.lock:
             self._subscriptions = (*self._subscriptions, subscription)
+            self.outbox.interest(self._subscriptions)
         return subscription
 
     def _unsubscribe(self, subscription: Subscription) -> None:
         with self.lock:
             self._subscriptions = tuple(s for s in self._subscriptions if s is not subscription)
+            self.outbox.interest(self._subscriptions)
 
     def _settle_and_notify(self) -> None:
         self._depth += 1

@@ -282,3 +282,59 @@ def test_close_fails_what_is_in_flight_and_refuses_what_comes_after(rig: Simulat
     assert after.refused and after.reason == "the manager is closed"
     assert rig.manager.change_state("actuation", "configure").refused
     assert rig.manager.change_to("actuation", "inactive").refused
+
+
+def test_an_event_nobody_wants_is_not_made_and_a_filtered_observer_misses_nothing() -> None:
+    """With no observer, a change makes no event at all; an observer of one part's actual gets
+    exactly what an observer of everything sees of that part's actual."""
+    import sm_bt.engine.events as events
+
+    made: list[object] = []
+    put, actual = events.Outbox.put, events.Outbox.actual
+
+    def counted_put(self: events.Outbox, event: events.Event) -> None:
+        made.append(event)
+        put(self, event)
+
+    def counted_actual(self: events.Outbox, event: events.Event) -> None:
+        made.append(event)
+        actual(self, event)
+
+    rig = SimulatedSystem(bundled("actuation"), rules=False, recovery=False, record=False)
+    events.Outbox.put, events.Outbox.actual = counted_put, counted_actual  # type: ignore[method-assign]
+    try:
+        rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+        assert made == []
+        everything: list[events.Event] = []
+        one: list[events.Event] = []
+        rig.manager.subscribe(everything.append)
+        subscription = rig.manager.subscribe(one.append, part="drive_base", kinds=[EventKind.ACTUAL])
+        rig.finish(rig.manager.change_mode("actuation", "MODERATE"))
+        assert one and one == [e for e in everything if e.part == "drive_base" and e.kind is EventKind.ACTUAL]
+        subscription.cancel()
+        everything.clear()
+        one.clear()
+        rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE"))
+        assert everything and one == []
+    finally:
+        events.Outbox.put, events.Outbox.actual = put, actual  # type: ignore[method-assign]
+
+
+def test_the_outbox_knows_which_kinds_of_which_parts_are_wanted() -> None:
+    from sm_bt.engine.events import Outbox, Subscription
+
+    def subscription(parts: set[str] | None, kinds: set[EventKind] | None) -> Subscription:
+        return Subscription(lambda event: None, None if parts is None else frozenset(parts),
+                            None if kinds is None else frozenset(kinds), lambda s: None)
+
+    outbox = Outbox()
+    assert not outbox.wanted(EventKind.ACTUAL, "a")
+    outbox.interest([subscription({"a"}, {EventKind.ACTUAL}), subscription(None, {EventKind.REQUEST})])
+    assert outbox.wanted(EventKind.ACTUAL, "a") and not outbox.wanted(EventKind.ACTUAL, "b")
+    assert outbox.wanted(EventKind.REQUEST, "b") and not outbox.wanted(EventKind.TARGET, "a")
+    outbox.interest([subscription({"b"}, None)])
+    assert all(outbox.wanted(kind, "b") for kind in EventKind) and not outbox.wanted(EventKind.REQUEST, "a")
+    outbox.interest([subscription(None, None)])
+    assert all(outbox.wanted(kind, part) for kind in EventKind for part in ("a", "b", "c"))
+    outbox.interest([])
+    assert not any(outbox.wanted(kind, "a") for kind in EventKind)
