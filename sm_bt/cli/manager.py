@@ -35,6 +35,10 @@ class RosMissing(Error):
     """The ROS 2 extra is not installed (the message says how to install it)."""
 
 
+#: Start-up lines logged at most (a large model's would be hundreds of thousands).
+STARTUP_LINES = 1000
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="MODEL", help="model file, or the name of a bundled model")
     parser.add_argument("--node-name", default="__mode_manager",
@@ -52,6 +56,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--requester", default="operator", metavar="NAME",
                         help="who the requests through the system_modes interface come from: their priority "
                              "against the parts' holds (default operator, priority 80)")
+    parser.add_argument("--serve", choices=("all", "systems"), default="all",
+                        help="whose system_modes interface to serve: every part's, as the reference (default), "
+                             "or the systems' only (a plant of hundreds of nodes: each node's is 15 DDS endpoints)")
     parser.add_argument("--no-rules", action="store_true", help="do not apply the model's rules")
     parser.add_argument("--no-recovery", action="store_true", help="do not restore nodes that left their target")
     parser.add_argument("--lenient", action="store_true",
@@ -69,14 +76,14 @@ def _policy(text: str) -> str:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def startup_lines(model: Model) -> list[str]:
-    """What the manager serves, in the reference's start-up log format."""
+def startup_lines(model: Model, nodes: bool = True) -> list[str]:
+    """What the manager serves, in the reference's start-up log format (``nodes``: theirs too)."""
     lines: list[str] = []
     for part in model.systems:
         lines.append(f"- system '{part.name}'")
         lines.extend(f"  - /{part.name}/{name}" for name in ("change_state", "get_state", "get_available_states",
                                                              "change_mode", "get_mode", "get_available_modes"))
-    for node in model.nodes:
+    for node in model.nodes if nodes else ():
         lines.append(f"- node '{node.name}'")
         lines.extend(f"  - /{node.name}/{name}" for name in ("change_mode", "get_mode", "get_available_modes"))
     return lines
@@ -89,7 +96,8 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
     try:
         from sm_bt.ros.runtime import RosRuntime
 
-        runtime = RosRuntime(model, node_name=args.node_name, requester=args.requester, manager_options={
+        runtime = RosRuntime(model, node_name=args.node_name, requester=args.requester,
+                             serve_nodes=args.serve == "all", manager_options={
             "grace_period": args.grace_period, "request_timeout": args.request_timeout,
             "recovery_attempts": args.recovery_attempts, "rules": not args.no_rules,
             "recovery": not args.no_recovery, "on_failure": args.on_failure})
@@ -103,11 +111,15 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
         from sm_bt.ros.environment import describe_discovery
 
         log.info("discovery: %s", describe_discovery())  # the first thing to check when nodes are not found
-        for line in startup_lines(model):
+        lines = startup_lines(model, nodes=args.serve == "all")
+        for line in lines[:STARTUP_LINES]:
             log.info(line)
+        if len(lines) > STARTUP_LINES:
+            log.info("... and %d more lines of services", len(lines) - STARTUP_LINES)
         systems = sum(isinstance(p, SystemPart) for p in model.parts.values())
-        print(f"mode manager {args.node_name} serving {systems} system(s) and {len(model.nodes)} node(s) of "
-              f"{model.path}; Ctrl-C to stop", flush=True)
+        nodes = f"and {len(model.nodes)} node(s)" if args.serve == "all" else f"(not their {len(model.nodes)} node(s))"
+        print(f"mode manager {args.node_name} serving {systems} system(s) {nodes} of {model.path}; Ctrl-C to stop",
+              flush=True)
         stop.wait()
     finally:
         runtime.close()

@@ -94,10 +94,13 @@ def _mode_label(actual: Actual) -> str:
 class ModeManagerServer:
     """Serve ``manager``'s parts on ``node``; ``close()`` removes the services and topics. The
     requests made through the interface come from ``requester`` (its priority decides against the
-    parts' holds, :mod:`sm_bt.engine.holds`)."""
+    parts' holds, :mod:`sm_bt.engine.holds`). With ``nodes=False`` only the systems are served
+    (the reference serves every node too: at plant size, each node's 6 services and 3 topics are 15
+    DDS endpoints that every participant learns of, and that take seconds to make and to remove)."""
 
     def __init__(self, node: Node, manager: ModeManager,
-                 on_request: Callable[[str, Request], None] | None = None, requester: str = "operator") -> None:
+                 on_request: Callable[[str, Request], None] | None = None, requester: str = "operator", *,
+                 nodes: bool = True) -> None:
         self._node = node
         self._manager = manager
         self.requester = requester
@@ -114,13 +117,14 @@ class ModeManagerServer:
         # The last published values, so each event carries its real start (and none repeats).
         self._modes: dict[str, str] = {}
         self._states: dict[str, State] = {}
-        for name, part in manager.model.parts.items():
-            self._serve(name, isinstance(part, SystemPart))
+        served = [name for name, part in manager.model.parts.items() if nodes or isinstance(part, SystemPart)]
+        for name in served:
+            self._serve(name, isinstance(manager.model.parts[name], SystemPart))
         with manager.lock:  # the current values first, then every change: none missed, none stale
-            for name in manager.model.parts:
+            for name in served:
                 self._publish_actual(name, manager.actual(name))
             self._subscription: Subscription | None = manager.subscribe(
-                self._on_event, kinds=(EventKind.ACTUAL, EventKind.TARGET))
+                self._on_event, None if nodes else served, kinds=(EventKind.ACTUAL, EventKind.TARGET))
 
     def close(self) -> None:
         if self._subscription is not None:

@@ -71,10 +71,11 @@ class RosRuntime:
 
     ``manager_options`` go to :class:`ModeManager` (``grace_period``, ``request_timeout``, ...),
     ``backend_options`` to :class:`~sm_bt.ros.backend.RosBackend` (``liveness_timeout``, ...;
-    ``call_timeout`` is the request timeout unless given). ``serve=False`` leaves out the ROS services and topics (the
-    behaviours alone). ``own_domain`` is for self-contained runs (demo, tests): a per-run
-    ``ROS_DOMAIN_ID`` and discovery on this machine unless set; otherwise the user's settings (and
-    ROS's defaults) apply, so nodes and manager may run on different machines.
+    ``call_timeout`` is the request timeout unless given). ``serve=False`` leaves out the ROS
+    services and topics (the behaviours alone); ``serve_nodes=False`` serves the systems'
+    interface only, not each node's. ``own_domain`` is for self-contained runs (demo, tests): a
+    per-run ``ROS_DOMAIN_ID`` and discovery on this machine unless set; otherwise the user's
+    settings (and ROS's defaults) apply, so nodes and manager may run on different machines.
 
     ``switch_interval``: if given, the interpreter's GIL switch interval (``sys.setswitchinterval``)
     while the runtime runs, put back by :meth:`close`; by default (``None``) the interpreter's own.
@@ -89,7 +90,7 @@ class RosRuntime:
                  own_domain: bool = False, manager_options: Mapping[str, Any] | None = None,
                  backend_options: Mapping[str, Any] | None = None, node: Any = None,
                  switch_interval: float | None = None, events_executor: bool = True,
-                 requester: str = "operator") -> None:
+                 requester: str = "operator", serve_nodes: bool = True) -> None:
         self._switch_interval: tuple[float, float] | None = None
         if node is None:
             prepare(own_domain=own_domain, local_only=own_domain)
@@ -150,7 +151,7 @@ class RosRuntime:
         # decides against the holds of the manager's own users, a tree in this process).
         self.server = ModeManagerServer(self.node, self.manager,
                                         self.diagnostics.requested if self.diagnostics else None,
-                                        requester=requester) if serve else None
+                                        requester=requester, nodes=serve_nodes) if serve else None
         if switch_interval is not None:
             self._switch_interval = (sys.getswitchinterval(), switch_interval)
             sys.setswitchinterval(switch_interval)

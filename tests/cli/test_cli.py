@@ -464,3 +464,15 @@ def test_a_typo_in_a_change_is_a_usage_error_with_the_closest_name(capsys: pytes
                                                                    says: str) -> None:
     code, out, err = run(capsys, "monitor", "pilot", "--change", change, "--once")
     assert (code, out, err) == (2, "", f"sm-bt monitor: error: {says}\n")
+
+
+def test_the_managers_start_up_lines_name_the_nodes_only_when_it_serves_them() -> None:
+    from model_files import bundled
+
+    from sm_bt.cli.manager import startup_lines
+
+    every = startup_lines(bundled("pilot"))
+    systems = startup_lines(bundled("pilot"), nodes=False)
+    assert "- node 'amcl'" in every and "  - /amcl/change_mode" in every
+    assert systems == [line for line in every if line.startswith(("- system", "  - /pilot/"))]
+    assert "  - /pilot/change_state" in systems

@@ -404,3 +404,19 @@ def test_a_hold_over_ros_keeps_its_part_while_renewed_and_ends_with_its_lease_or
     assert re.match(r"pilot: held in f_degraded_mode \(hold #\d+, lease 0\.6 s\); released in 1 s or at Ctrl-C\n"
                     r"pilot: released\n$", out), out
     assert not manager.holds() and str(manager.actual("pilot")) == "active.f_degraded_mode"
+
+
+def test_a_manager_serving_its_systems_only_has_no_interface_for_its_nodes(ros_context: RosContext) -> None:
+    ros = RosRuntime(bundled("pilot"), node_name="sm_bt_systems_only_test", serve_nodes=False,
+                     manager_options={"rules": False, "recovery": False})
+    try:
+        def served() -> set[str]:
+            return {name for name, _ in ros_context.node.get_service_names_and_types_by_node(
+                "sm_bt_systems_only_test", "/")}
+
+        wait_until(lambda: "/pilot/change_mode" in served(), 10.0, "the system's interface is not served")
+        names = served()
+        assert {"/pilot/change_state", "/pilot/get_mode", "/pilot/get_available_modes"} <= names
+        assert not [name for name in names if name.startswith("/amcl/")], sorted(names)
+    finally:
+        ros.close()
