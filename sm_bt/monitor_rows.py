@@ -203,19 +203,24 @@ class Rows:
         return rows, summary
 
     def _shown(self) -> list[str]:
-        selection, place = self.selection, self._place
-        limit = selection.limit
-        if not selection.diverging and (limit is None or len(self._candidates) <= limit):
-            return self._candidates
-        diverging = sorted((not error, place[part]) for part, error in self._diverging.items() if part in place)
-        picked = [place_ for _, place_ in diverging[:limit]]
-        if not selection.diverging and limit is not None and len(picked) < limit:
-            taken = set(picked)
-            for index in self._fill:
-                if len(picked) >= limit:
-                    break
-                if index not in taken:
-                    picked.append(index)
-        candidates = self._candidates
-        return [candidates[index] for index in sorted(picked)]
+        return shown(self._candidates, self._place, self._fill, self._diverging, self.selection)
 
+
+def shown(candidates: list[str], place: dict[str, int], fill: list[int], diverging: dict[str, bool],
+          selection: Selection) -> list[str]:
+    """The parts :class:`Selection` shows: of ``candidates`` (display order; ``place``: each one's
+    index there; ``fill``: their indices from the top of the hierarchy down), given the parts that
+    diverge (``diverging``: part -> whether it is an error)."""
+    limit = selection.limit
+    if not selection.diverging and (limit is None or len(candidates) <= limit):
+        return candidates
+    ranked = sorted((not error, place[part]) for part, error in diverging.items() if part in place)
+    picked = [index for _, index in ranked[:limit]]
+    if not selection.diverging and limit is not None and len(picked) < limit:
+        taken = set(picked)
+        for index in fill:
+            if len(picked) >= limit:
+                break
+            if index not in taken:
+                picked.append(index)
+    return [candidates[index] for index in sorted(picked)]

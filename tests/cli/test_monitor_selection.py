@@ -8,12 +8,16 @@ import re
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis_profiles import examples
 from model_generator import flat_system_text, model_from_text
 from rich.console import Console
 
 from sm_bt.cli import main
 from sm_bt.engine.manager import ModeManager
 from sm_bt.monitor import Monitor, Selection, render_text, to_json
+from sm_bt.monitor_rows import shown as shown_parts
 from sm_bt.sim import SimulatedSystem
 
 NODES = 300
@@ -155,3 +159,35 @@ def test_the_rest_fills_a_limit_from_the_top_of_the_hierarchy_down() -> None:
     system = SimulatedSystem(fixture("nested"), rules=False, recovery=False)  # robot > base > drive, lidar; arm
     assert shown(Monitor(system.manager, io.StringIO(), selection=Selection(limit=2))) == ["base", "robot"]
     assert shown(Monitor(system.manager, io.StringIO(), selection=Selection(limit=3))) == ["base", "robot", "arm"]
+
+
+@st.composite
+def _selection_cases(draw: st.DrawFn) -> tuple[list[str], list[str], dict[str, bool], Selection]:
+    names = draw(st.lists(st.text("abc", min_size=1, max_size=3), min_size=1, max_size=25, unique=True))
+    fill = draw(st.permutations(names))
+    diverging = draw(st.dictionaries(st.sampled_from([*names, "elsewhere"]), st.booleans(), max_size=len(names) // 2))
+    patterns = draw(st.lists(st.sampled_from(["a*", "?b", "c", "*"]), max_size=2))
+    # Mostly a limit below the number of parts: where the order of what is shown matters.
+    limit = draw(st.none() | st.integers(1, max(1, len(names) - 1)) | st.integers(1, len(names) + 5))
+    selection = Selection(tuple(patterns), draw(st.booleans()), limit)
+    return names, list(fill), diverging, selection
+
+
+@given(_selection_cases())
+@examples(300)
+def test_a_selection_shows_what_its_rules_say(case: tuple[list[str], list[str], dict[str, bool], Selection]) -> None:
+    """Against the rules written out plainly: the matching parts (only the diverging ones if asked),
+    and over the limit errors first, then other divergences (each in display order), then the
+    rest from the top of the hierarchy down; shown in display order."""
+    names, top_down, diverging, selection = case
+    candidates = selection.names(names)
+    place = {part: index for index, part in enumerate(candidates)}
+    fill = [place[part] for part in top_down if part in place]
+    expected = [part for part in candidates if not selection.diverging or part in diverging]
+    if selection.limit is not None and len(expected) > selection.limit:
+        def rank(part: str) -> tuple[int, int]:
+            if part in diverging:
+                return (0 if diverging[part] else 1, place[part])
+            return (2, top_down.index(part))
+        expected = sorted(sorted(expected, key=rank)[:selection.limit], key=place.__getitem__)
+    assert shown_parts(candidates, place, fill, diverging, selection) == expected

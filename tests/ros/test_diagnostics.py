@@ -7,6 +7,9 @@ import logging
 from dataclasses import dataclass
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis_profiles import examples
 from model_files import bundled
 
 from sm_bt.engine.lifecycle import Transition
@@ -168,3 +171,25 @@ def test_a_burst_larger_than_a_message_goes_out_over_several_urgent_ones_first()
     assert sent == set(parts)
     with pytest.raises(ValueError, match="at least two"):
         Paging(parts, children, limit=1)
+
+
+@given(st.integers(2, 60), st.integers(2, 40), st.data())
+@examples(200)
+def test_every_part_is_published_within_the_cycle_whatever_diverges(count: int, limit: int,
+                                                                      data: st.DataObject) -> None:
+    """Whatever diverges each period, a message holds at most ``limit`` statuses, the top quarter
+    and as many divergences as half of it allows (from the top down), and every part is in one of
+    the messages of any ``cycle`` periods in a row."""
+    parts, children = flat(count)
+    paging = Paging(parts, children, limit=limit)
+    seen: set[str] = set()
+    for _ in range(paging.cycle):
+        diverging = data.draw(st.sets(st.sampled_from(parts)))
+        message = paging.periodic(diverging)
+        assert len(message) <= limit and len(set(message)) == len(message)
+        if paging.paged:
+            top = parts[:limit // 4]
+            wanted = sorted(set(diverging) - set(top), key=parts.index)[:limit // 2]
+            assert set(top) | set(wanted) <= set(message)
+        seen.update(message)
+    assert seen == set(parts)
