@@ -19,7 +19,7 @@ from sm_bt.engine.events import Cause, Event, EventKind
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.snapshots import PartSnapshot
 from sm_bt.model.hierarchy import parts_below, top_down
-from sm_bt.model.types import NodePart, SystemPart
+from sm_bt.model.types import NodePart
 
 INFERRED = "(*)"
 #: The events that can change a row (requests, rules and failures show through these).
@@ -102,11 +102,6 @@ class Selection:
         if self.limit is not None and self.limit < 1:
             raise ValueError(f"a monitor shows at least one row, not {self.limit}")
 
-    @property
-    def narrowed(self) -> bool:
-        """Whether it may leave parts out."""
-        return bool(self.patterns) or self.diverging or self.limit is not None
-
     def names(self, parts: Iterable[str]) -> list[str]:
         """The parts (of ``parts``) whose names match."""
         if not self.patterns:
@@ -131,8 +126,13 @@ class Summary:
         """``111,111 parts (11,111 systems, 100,000 nodes): 12 diverge, 1 an error; 40 shown``."""
         diverging = f"{self.diverging:,} diverge" + (f", {self.errors:,} an error" if self.errors == 1 else
                                                      f", {self.errors:,} errors" if self.errors else "")
-        return (f"{_count(self.parts, 'part')} ({_count(self.systems, 'system')}, {_count(self.nodes, 'node')}): "
-                f"{diverging if self.diverging else 'none diverges'}; {self.shown:,} shown")
+        return (f"{parts_phrase(self.parts, self.systems)}: {diverging if self.diverging else 'none diverges'}; "
+                f"{self.shown:,} shown")
+
+
+def parts_phrase(parts: int, systems: int) -> str:
+    """``111,111 parts (11,111 systems, 100,000 nodes)``: how large a model is, where its parts are counted."""
+    return f"{_count(parts, 'part')} ({_count(systems, 'system')}, {_count(parts - systems, 'node')})"
 
 
 def _count(number: int, noun: str) -> str:
@@ -149,9 +149,7 @@ class Rows:
         self._manager = manager
         self.selection = selection
         model = manager.model
-        self._systems = sum(isinstance(spec, SystemPart) for spec in model.parts.values())
-        self._nodes = sum(isinstance(spec, NodePart) for spec in model.parts.values())
-        self._children = {name: spec.parts for name, spec in model.parts.items() if isinstance(spec, SystemPart)}
+        self._children = {system.name: system.parts for system in model.systems}
         ordered = sorted(model.parts, key=lambda name: (isinstance(model.parts[name], NodePart), name))
         # The candidates in display order; a part's place in it orders any subset.
         self._candidates = selection.names(ordered)
@@ -198,8 +196,8 @@ class Rows:
                 rows.append(row)
             if len(cache) > 2 * len(rows) + 64:  # rows of parts no longer shown: made again if they are
                 self._cache = {row.part: row for row in rows}
-            summary = Summary(self._systems + self._nodes, self._systems, self._nodes, len(self._diverging),
-                              self._errors, len(rows))
+            parts, systems = len(manager.model.parts), len(self._children)
+            summary = Summary(parts, systems, parts - systems, len(self._diverging), self._errors, len(rows))
         return rows, summary
 
     def _shown(self) -> list[str]:

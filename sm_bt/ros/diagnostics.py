@@ -46,7 +46,8 @@ from sm_bt.engine.events import Divergence, Event, EventKind, Subscription
 from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.hierarchy import parts_below, top_down
-from sm_bt.model.types import NodePart, SystemPart
+from sm_bt.model.types import NodePart
+from sm_bt.monitor_rows import parts_phrase
 from sm_bt.ros import removable
 
 log = logging.getLogger("sm_bt.ros.diagnostics")
@@ -192,10 +193,6 @@ def part_diagnostic(manager: ModeManager, part: str, last: Request | None, link:
     return PartDiagnostic(part, level, message, tuple(values))
 
 
-def _count(number: int, noun: str) -> str:
-    return f"{number:,} {noun}{'' if number == 1 else 's'}"
-
-
 class DiagnosticsPublisher:
     """Publish ``manager``'s parts on ``/diagnostics`` from ``node``, on change and every ``period``
     seconds (timed by ``clock``); ``link(node)`` says how a node answers, if the backend knows."""
@@ -216,7 +213,7 @@ class DiagnosticsPublisher:
         self._dirty: set[str] = set()
         self._urgent: set[str] = set()  # of the dirty parts, those to publish first (failures)
         model = manager.model
-        self._children = {name: part.parts for name, part in model.parts.items() if isinstance(part, SystemPart)}
+        self._children = {system.name: system.parts for system in model.systems}
         self._paging = Paging(model.parts, self._children, limit)
         self._flush: TimerHandle | None = None
         self._closed = False
@@ -300,10 +297,9 @@ class DiagnosticsPublisher:
         systems = len(self._children)
         level = ERROR if errors else WARN if divergences else OK
         every = self._paging.cycle * self._period
-        message = (f"{_count(len(model.parts), 'part')} ({_count(systems, 'system')}, "
-                   f"{_count(len(model.parts) - systems, 'node')}): "
-                   f"{len(divergences):,} diverge, {errors:,} beyond their grace period; {self._paging.limit:,} "
-                   f"statuses a message, each part at least every {every:g} s")
+        message = (f"{parts_phrase(len(model.parts), systems)}: {len(divergences):,} diverge, {errors:,} beyond "
+                   f"their grace period; {self._paging.limit:,} statuses a message, each part at least every "
+                   f"{every:g} s")
         return PartDiagnostic("", level, message, (("parts", str(len(model.parts))),
                                                   ("diverging", str(len(divergences))), ("errors", str(errors)),
                                                   ("every_part_within_s", f"{every:g}")))
