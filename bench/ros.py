@@ -231,18 +231,40 @@ class Turns:
         wait_for(lambda: all(self.manager.observation(n).parameters == self.values[mode][n]
                              for n in self.baseline.nodes), "manager sees the baseline's values")
 
+    def baseline_bring_ups(self, samples: int, *, reset_last: bool = True) -> None:
+        """The baseline's part of a bring-up turn: an untimed bring-up and shutdown first (either side
+        is measurably slower, by up to 1-2 ms of its 15-20, right after the other side made the
+        calls), then ``samples`` timed bring-ups, each shut down again (the last only if
+        ``reset_last``)."""
+        self.baseline.wake()
+        self.baseline_bring_up()
+        self.baseline_reset()
+        for index in range(samples):
+            self.times["bring_baseline"].append(self.baseline_bring_up())
+            if reset_last or index < samples - 1:
+                self.baseline_reset()
+        self.baseline.rest()
+
+    def switch_turn(self) -> None:
+        """The manager there and back, then the baseline there and back (the nodes end where the
+        manager's target wants them, so its next switch is a real one and publishes mode_event)."""
+        self.manager_to("FAST")
+        self.manager_to("__DEFAULT__")
+        self.baseline.wake()
+        self.baseline_to("FAST")
+        self.baseline_to("__DEFAULT__")
+        self.baseline.rest()
+
 
 def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, dict[str, dict[str, Any]]],
            bring_ups: int, switches: int, count: int) -> list[Figure]:
     turns = Turns(baseline, manager, values, count)
     times, delays = turns.times, turns.delays
     manager_one, manager_two, manager_reset = turns.manager_one, turns.manager_two, turns.manager_reset
-    baseline_bring_up, baseline_reset = turns.baseline_bring_up, turns.baseline_reset
-    manager_to, baseline_to = turns.manager_to, turns.baseline_to
 
     # Bring-up, each in turn from a shutdown it made itself, as in use (a manager's targets then
-    # agree with the nodes; either side is measurably slower, by up to 1-2 ms of its 15-20, right
-    # after the other side made the calls): a turn starts with an untimed bring-up and shutdown.
+    # agree with the nodes): a turn starts with an untimed bring-up and shutdown. The last leaves
+    # the nodes up for the switches.
     for index in range(bring_ups):
         manager_one()
         manager_reset()
@@ -250,25 +272,9 @@ def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, di
         manager_reset()
         times["one"].append(manager_one())
         manager_reset()
-        baseline.wake()
-        baseline_bring_up()
-        baseline_reset()
-        times["bring_baseline"].append(baseline_bring_up())
-        baseline_reset()
-        times["bring_baseline"].append(baseline_bring_up())
-        if index != bring_ups - 1:
-            baseline_reset()
-        baseline.rest()
-
-    # Mode switches: the manager there and back, then the baseline there and back (the nodes end where
-    # the manager's target wants them, so its next switch is a real one and publishes mode_event).
+        turns.baseline_bring_ups(2, reset_last=index != bring_ups - 1)
     for _ in range(switches):
-        manager_to("FAST")
-        manager_to("__DEFAULT__")
-        baseline.wake()
-        baseline_to("FAST")
-        baseline_to("__DEFAULT__")
-        baseline.rest()
+        turns.switch_turn()
 
     def ratio(ours: str, baseline_key: str) -> tuple[float, dict[str, Any]]:
         mine, base = statistics.median(times[ours]), statistics.median(times[baseline_key])

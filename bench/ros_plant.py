@@ -251,8 +251,6 @@ def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, di
     failed: list[str] = []
     count = shape["nodes"]
     manager_one, manager_reset = steps.manager_one, steps.manager_reset
-    baseline_bring_up, baseline_reset = steps.baseline_bring_up, steps.baseline_reset
-    manager_to, baseline_to = steps.manager_to, steps.baseline_to
 
     def failure(error: RuntimeError) -> None:
         failed.append(str(error)[:300])
@@ -285,12 +283,7 @@ def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, di
         manager_reset()
         times["one"].append(manager_one())
         manager_reset()
-        baseline.wake()
-        baseline_bring_up()
-        baseline_reset()
-        times["bring_baseline"].append(baseline_bring_up())
-        baseline_reset()
-        baseline.rest()
+        steps.baseline_bring_ups(1)
 
     def shut_down() -> None:
         manager_one()
@@ -302,18 +295,9 @@ def _p1_p2(baseline: BaselineProcess, manager: ModeManager, values: dict[str, di
         attempt(manager_one, manager_one)  # the switches start from __DEFAULT__
         _say(clock, f"{turns} bring-up turns done")
 
-    # The nodes end where the manager's target wants them, so its next switch is a real one.
-    def switch_turn() -> None:
-        manager_to("FAST")
-        manager_to("__DEFAULT__")
-        baseline.wake()
-        baseline_to("FAST")
-        baseline_to("__DEFAULT__")
-        baseline.rest()
-
     def mode_switches() -> None:
         for _ in range(switches):
-            attempt(switch_turn, manager_one)
+            attempt(steps.switch_turn, manager_one)
         _say(clock, f"{switches} switch turns done")
 
     # Past MAX_FAILED failures the turns stop, and the figures are what was measured until then.
