@@ -13,12 +13,14 @@ from typing import Any
 import partitions
 import pytest
 from hosts import Hosts, two_hosts_fixture  # noqa: F401
+from ros_processes import Starved
 
 from sm_bt.ros.diagnostics import ERROR
 
 pytestmark = [pytest.mark.ros, pytest.mark.netns]
 
-#: The manager's liveness window on a good link (RosBackend's default): detection within a second.
+#: The manager's liveness window on a good link (RosBackend's default): detection within a second,
+#: plus as long as a process stood still meanwhile (a machine loaded by the whole suite: 1.21 s once).
 DETECTION = 1.0
 LIVENESS = 0.9
 #: The manager's own reason for a node it cannot reach.
@@ -76,9 +78,11 @@ def test_an_idle_cut_is_told_within_a_second_with_the_honest_reason_and_healed(t
     _, manager, diagnostics = start(hosts, "--state", "inactive")
     events.wait_for_publishers(1, timeout=10.0)
     time.sleep(1.0)
-    cut = hosts.cut()
-    told, _ = events.wait_for(lambda m: m["goal_state"]["label"] == "unknown", timeout=5.0, since=cut)
-    assert told - cut <= DETECTION, f"pilot unknown {told - cut:.2f} s after the cut"
+    with Starved() as starved:
+        cut = hosts.cut()
+        told, _ = events.wait_for(lambda m: m["goal_state"]["label"] == "unknown", timeout=5.0, since=cut)
+    assert told - cut <= DETECTION + starved.worst, (
+        f"pilot unknown {told - cut:.2f} s after the cut (a process here stood still for {starved.worst:.2f} s)")
     vanished = wait_for_lines(manager, len(NODES), "vanished")  # the first makes the pilot unknown
     assert sorted(m.group(1) for line in vanished if (m := UNREACHABLE.search(line))) == sorted(NODES), vanished
     assert not manager.lines("process gone")
@@ -108,15 +112,18 @@ def test_a_cut_during_a_change_fails_it_within_a_second_on_diagnostics(two_hosts
     try:
         # The change has begun on the robot: cut now.
         amcl_events.wait_for(lambda m: m["goal_state"]["label"] == "configuring", timeout=20.0)
-        cut = hosts.cut()
-        failed_at, message = diagnostics.wait_for(
-            lambda m: (s := status(m, "pilot")) is not None and values(s)["last_request_outcome"] == "failed",
-            timeout=12.0, since=cut)
+        with Starved() as starved:
+            cut = hosts.cut()
+            failed_at, message = diagnostics.wait_for(
+                lambda m: (s := status(m, "pilot")) is not None and values(s)["last_request_outcome"] == "failed",
+                timeout=12.0, since=cut)
     finally:
         change.join(30.0)
     pilot = status(message, "pilot")
     assert pilot is not None and level(pilot) == ERROR
-    assert failed_at - cut <= DETECTION, f"failed {failed_at - cut:.2f} s after the cut\n{manager.stderr}"
+    assert failed_at - cut <= DETECTION + starved.worst, (
+        f"failed {failed_at - cut:.2f} s after the cut (a process here stood still for {starved.worst:.2f} s)\n"
+        f"{manager.stderr}")
     assert re.search(r"no answer from /\w+ for (?:0\.9|1\.0) s", values(pilot)["last_request_reason"]), values(pilot)
     print(f"MEASURED cut mid-change: failure on /diagnostics {failed_at - cut:.2f} s after the cut")
     # The waiting command heard the failure on /diagnostics too, rather than waiting out its 15 s.

@@ -9,14 +9,13 @@ from __future__ import annotations
 import os
 import re
 import signal
-import threading
 import time
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
 from model_files import bundled
-from ros_processes import NodeProcess, RosContext, Starter, wait_until
+from ros_processes import NodeProcess, RosContext, Starter, Starved, wait_until
 
 from sm_bt.model.states import State
 from sm_bt.ros.backend import RosBackend
@@ -74,31 +73,6 @@ def diagnostics_of(ros_context: RosContext) -> list[Any]:
 def _reachable(ros: RosRuntime, names: tuple[str, ...] = ("amcl", "controller_server", "pointcloud_to_laser",
                                                            "laser_resender")) -> None:
     wait_until(lambda: all(ros.manager.observation(n).reachable for n in names), 15.0, "nodes not discovered")
-
-
-class Starved:
-    """How long this process (the manager's, here) went without running while in the block: a thread
-    that sleeps 10 ms at a time keeps the worst oversleep. On a machine so loaded that the process
-    itself waited for a core, a bound of the manager's own can only hold that much later."""
-
-    def __init__(self) -> None:
-        self.worst = 0.0
-        self._done = threading.Event()
-        self._thread = threading.Thread(target=self._watch, name="starved", daemon=True)
-
-    def _watch(self) -> None:
-        while not self._done.is_set():
-            asked = time.monotonic()
-            time.sleep(0.01)
-            self.worst = max(self.worst, time.monotonic() - asked - 0.01)
-
-    def __enter__(self) -> Starved:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._done.set()
-        self._thread.join(1.0)
 
 
 class Stopped:

@@ -399,3 +399,29 @@ def line_within(stream: IO[str] | None, timeout: float, what: str) -> str:
     if not got:
         raise AssertionError(f"{what}: no line within {timeout:g} s")
     return got[0]
+
+
+class Starved:
+    """How long this process went without running while in the block: a thread that sleeps 10 ms at
+    a time keeps the worst oversleep. On a machine so loaded that a process waited that long for a
+    core, a bound of the manager's own can only hold that much later (measured here, in the
+    manager's process or beside it: what the machine's load did to a process)."""
+
+    def __init__(self) -> None:
+        self.worst = 0.0
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="starved", daemon=True)
+
+    def _watch(self) -> None:
+        while not self._done.is_set():
+            asked = time.monotonic()
+            time.sleep(0.01)
+            self.worst = max(self.worst, time.monotonic() - asked - 0.01)
+
+    def __enter__(self) -> Starved:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self._thread.join(1.0)
