@@ -10,6 +10,8 @@ from sm_bt.model.types import ParamValue
 
 #: ``state.label`` without the call (``State.label`` lowers the name each time).
 STATE_LABELS = {state: state.label for state in State}
+# Read once: looking up an enum's member on its class is slow (EnumType.__getattr__).
+_UNKNOWN, _ACTIVE = State.UNKNOWN, State.ACTIVE
 
 
 class Actual(NamedTuple):
@@ -39,8 +41,7 @@ class Actual(NamedTuple):
     def is_(self, wanted: StateMode) -> bool:
         """Known and equal to ``wanted`` (as ``state_mode == wanted``, without making one)."""
         state = self.state
-        return state is wanted.state and state is not State.UNKNOWN and (
-            state is not State.ACTIVE or self.mode == wanted.mode)
+        return state is wanted.state and state is not _UNKNOWN and (state is not _ACTIVE or self.mode == wanted.mode)
 
     def meets(self, condition: StateMode) -> bool:
         """A rule's condition holds: :meth:`is_`, and ``unknown`` holds for a part whose state is

@@ -28,6 +28,9 @@ from sm_bt.model.types import Model, SystemPart
 
 #: Clock slack: a timer set for ``since + grace`` must find the grace period over when it fires.
 EPSILON = 1e-6
+# Read once: looking up an enum's member on its class is slow (EnumType.__getattr__).
+_IN_FLIGHT, _GRACE, _FAULT, _OVERRIDE = Cause.IN_FLIGHT, Cause.GRACE, Cause.FAULT, Cause.OVERRIDE
+_BY_RULE = Origin.RULE
 
 
 class Change(NamedTuple):
@@ -58,6 +61,7 @@ class Divergences:
         self._targets, self._actuals = inference.targets, inference.actuals  # read-only views
         self._systems = frozenset(name for name, spec in model.parts.items() if isinstance(spec, SystemPart))
         self._queue: list[tuple[int, str]] = []  # the dirty parts by height (children first)
+        self._height = hierarchy.height
         self._grace: list[tuple[float, str]] = []  # (due, part), a heap; stale entries are skipped
         self._grace_due: dict[str, float] = {}  # the last due pushed for each part
 
@@ -66,9 +70,10 @@ class Divergences:
     def touch(self, part: str) -> None:
         """``part``'s actual, target or circumstances changed: re-examine it (its systems follow
         when that changes what they see of it)."""
-        if part not in self._dirty:
-            self._dirty.add(part)
-            heapq.heappush(self._queue, (self._hierarchy.height[part], part))
+        dirty = self._dirty
+        if part not in dirty:
+            dirty.add(part)
+            heapq.heappush(self._queue, (self._height[part], part))
 
     @property
     def pending(self) -> bool:
@@ -137,7 +142,7 @@ class Divergences:
         while self._grace:
             due, part = self._grace[0]
             record = self.records.get(part)
-            live = record is not None and record.cause is Cause.GRACE
+            live = record is not None and record.cause is _GRACE
             if live and record is not None and abs(record.since + self.grace_period - due) < EPSILON:
                 return due
             heapq.heappop(self._grace)
@@ -152,24 +157,25 @@ class Divergences:
         re-examined divergence that is a ``FAULT`` (children before their systems)."""
         changes: list[Change] = []
         faults: list[Divergence] = []
-        while self._queue:
-            part = heapq.heappop(self._queue)[1]
-            self._dirty.discard(part)
-            new = self._examine(part, now)
-            old = self.records.get(part)
+        queue, dirty, records, examine, pop = self._queue, self._dirty, self.records, self._examine, heapq.heappop
+        while queue:
+            part = pop(queue)[1]
+            dirty.discard(part)
+            new = examine(part, now)
+            old = records.get(part)
             if new is None:
                 if old is not None:
-                    del self.records[part]
+                    del records[part]
                     self._notes.pop(part, None)
                     changes.append(Change(part, old, None))
                 continue
-            self.records[part] = new
+            records[part] = new
             # While a request works on it, a divergence's actual and reason move with every node
             # report: those show in ACTUAL events (and in the record), not as changes.
             if old is None or old.cause is not new.cause or old.target != new.target or (
-                    new.cause is not Cause.IN_FLIGHT and (old.actual != new.actual or old.reason != new.reason)):
+                    new.cause is not _IN_FLIGHT and (old.actual != new.actual or old.reason != new.reason)):
                 changes.append(Change(part, old, new))
-            if new.cause is Cause.FAULT:
+            if new.cause is _FAULT:
                 faults.append(new)
         return changes, faults
 
@@ -179,9 +185,9 @@ class Divergences:
         on_target = target is None or actual.is_(target)
         faulty = self._blamed[part] > 0 if part in self._systems else not on_target
         faulty_set = self._faulty
-        if faulty != (part in faulty_set):
+        if faulty is not (part in faulty_set):
             # Blamed by its systems when faulty or re-targeted by a rule: a fault below them.
-            by_rule = self._chosen.get(part) is Origin.RULE
+            by_rule = self._chosen.get(part) is _BY_RULE
             if faulty:
                 faulty_set.add(part)
             else:
@@ -195,16 +201,17 @@ class Divergences:
             return None
         assert target is not None
         since = self._since.setdefault(part, now)
+        grace = self.grace_period
         if self._busy.get(part, 0) > 0:
-            cause = Cause.IN_FLIGHT
-        elif now - since < self.grace_period - EPSILON:
-            cause = Cause.GRACE
-            due = since + self.grace_period
+            cause = _IN_FLIGHT
+        elif now - since < grace - EPSILON:
+            cause = _GRACE
+            due = since + grace
             if self._grace_due.get(part) != due:  # each grace period once, however often examined
                 self._grace_due[part] = due
                 heapq.heappush(self._grace, (due, part))
         elif faulty:
-            cause = Cause.FAULT
+            cause = _FAULT
         else:
-            cause = Cause.OVERRIDE
+            cause = _OVERRIDE
         return Divergence(part, target, actual, since, cause, self._notes.get(part) or actual.reason)

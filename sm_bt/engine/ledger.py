@@ -58,9 +58,11 @@ class Ledger:
     def apply(self, changes: Changes) -> None:
         now = self._clock.now()
         outbox, touch, watchers, waiting = self._outbox, self.divergences.touch, self._watchers, self.waiting
+        kind = EventKind.ACTUAL  # read once: an enum's member is slow to look up
+        wanting = outbox.wanting(kind)
         for part, (old, new) in changes.items():
-            if outbox.wanted(EventKind.ACTUAL, part):
-                outbox.actual(Event(EventKind.ACTUAL, part, now, "", new, None, None, None, old))
+            if wanting is None or part in wanting:
+                outbox.actual(Event(kind, part, now, "", new, None, None, None, old))
             touch(part)
             for watcher in watchers.get(part, ()):
                 touch(watcher)
@@ -79,6 +81,10 @@ class Ledger:
     def wants(self, kind: EventKind, part: str) -> bool:
         """Whether an observer wants such an event (else it need not be made)."""
         return self._outbox.wanted(kind, part)
+
+    def wanting(self, kind: EventKind) -> frozenset[str] | None:
+        """The parts whose events of ``kind`` an observer wants (``None``: every part)."""
+        return self._outbox.wanting(kind)
 
     def put(self, event: Event) -> None:
         self._outbox.put(event)

@@ -14,7 +14,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from sm_bt.engine.clock import Clock, TimerHandle
-from sm_bt.engine.divergences import Divergences
+from sm_bt.engine.divergences import Change, Divergences
 from sm_bt.engine.events import Divergence, Event, EventKind
 from sm_bt.engine.inference import Inference
 from sm_bt.engine.ledger import Ledger
@@ -39,6 +39,9 @@ class Reaction:
     condition: tuple[str, StateMode] | None = None
 
 
+_DIVERGENCE = EventKind.DIVERGENCE  # read once: an enum's member is slow to look up
+
+
 class Responses:
     """Answers the divergences ``divergences`` finds, booked in ``ledger``; its grace timer runs
     inside ``serialiser``'s entries."""
@@ -56,22 +59,24 @@ class Responses:
         self._grace_timer: TimerHandle | None = None
         self._grace_due: float | None = None
 
-    def changed(self, part: str, new: Divergence | None, now: float) -> None:
-        """``part``'s divergence is now ``new`` (None: back on target): logged once, told."""
-        if new is None:
-            self._reported.discard(part)
-            self._reactions.back_on_target(part, now)
-            if self._ledger.wants(EventKind.DIVERGENCE, part):
-                self._ledger.put(Event(EventKind.DIVERGENCE, part, now, "", self._inference.actual(part),
-                                       self._inference.target(part)))
-            return
-        if new.is_error and part not in self._reported:  # once per divergence, not per attempt
-            self._reported.add(part)
-            why = f": {new.reason}" if new.reason else ""
-            log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s%s).",
-                        part, new.target, new.actual, new.cause.value, why)
-        if self._ledger.wants(EventKind.DIVERGENCE, part):
-            self._ledger.put(Event(EventKind.DIVERGENCE, part, now, "", new.actual, None, new))
+    def changed(self, changes: Iterable[Change], now: float) -> None:
+        """Divergences that started, changed or ended (back on target): each logged once, told."""
+        wanting = self._ledger.wanting(_DIVERGENCE)
+        reported, back_on_target, put = self._reported, self._reactions.back_on_target, self._ledger.put
+        for part, _, new in changes:
+            if new is None:
+                reported.discard(part)
+                back_on_target(part, now)
+                if wanting is None or part in wanting:
+                    put(Event(_DIVERGENCE, part, now, "", self._inference.actual(part), self._inference.target(part)))
+                continue
+            if new.is_error and part not in reported:  # once per divergence, not per attempt
+                reported.add(part)
+                why = f": {new.reason}" if new.reason else ""
+                log.warning("Deviation detected in system or part '%s': should be %s, but is %s (%s%s).",
+                            part, new.target, new.actual, new.cause.value, why)
+            if wanting is None or part in wanting:
+                put(Event(_DIVERGENCE, part, now, "", new.actual, None, new))
 
     def react(self, faults: list[Divergence]) -> list[Reaction]:
         """The requests rules and recovery ask for, given ``faults`` (a give-up is noted and told here)."""

@@ -49,8 +49,7 @@ class Settling:
                 return
             now = self._clock.now()
             changes, faults = self._divergences.evaluate(now)
-            for change in changes:
-                self._responses.changed(change.part, change.new, now)
+            self._responses.changed(changes, now)
             holds = self._executions.holds
             if changes and holds:
                 holds.conditions_over(self._is_in)

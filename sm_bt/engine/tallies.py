@@ -24,6 +24,9 @@ MOVING_TO = {
 }
 _REASONS_KEPT = 4  # per system: a part flapping between two values, towards one of two modes
 _GOING_DOWN = (State.ACTIVE, State.ACTIVATING, State.DEACTIVATING)
+# The states the hot paths compare with, read once: looking up an enum's member on its class is
+# slow (EnumType.__getattr__).
+_UNKNOWN, _ACTIVE, _ACTIVATING, _ERRORPROCESSING = State.UNKNOWN, State.ACTIVE, State.ACTIVATING, State.ERRORPROCESSING
 
 
 #: How many unknown parts a system's reason names (the others are counted), so that it stays short
@@ -98,15 +101,17 @@ class Tally:
         self.system = system
         self._size = len(system.parts)
         self._modes_sorted = sorted(system.modes)
-        # part -> (mode name, entry target, the entry's place in the mode) for each entry that names
-        # it (don't-care entries name nothing).
-        self._by_part: dict[str, list[tuple[str, StateMode, int]]] = {part: [] for part in system.parts}
+        # mode -> {place of an entry its part does not meet: that part}
+        self._mismatch: dict[str, dict[int, str]] = {name: {} for name in system.modes}
+        # part -> (its mode's mismatches, the entry's state and mode, the entry's place in the mode)
+        # for each entry that names it (don't-care entries name nothing).
+        self._by_part: dict[str, list[tuple[dict[int, str], State, str | None, int]]] = {
+            part: [] for part in system.parts}
         for name, mode in system.modes.items():
             for place, entry in enumerate(mode.entries.values()):
                 if entry.target is not None:
-                    self._by_part.setdefault(entry.part, []).append((name, entry.target, place))
-        # mode -> {place of an entry its part does not meet: that part}
-        self._mismatch: dict[str, dict[int, str]] = {name: {} for name in system.modes}
+                    self._by_part.setdefault(entry.part, []).append(
+                        (self._mismatch[name], entry.target.state, entry.target.mode, place))
         # A plain dict with every state: Counter's lookup of a missing key runs Python code.
         self._states: dict[State, int] = dict.fromkeys(State, 0)
         self._unknown: set[str] = set()
@@ -119,19 +124,18 @@ class Tally:
     def update(self, part: str, old: Actual, new: Actual) -> None:
         """``part``'s actual went from ``old`` to ``new``."""
         self._states[old.state] -= 1
-        if old.state is State.UNKNOWN:
+        if old.state is _UNKNOWN:
             self._unknown.discard(part)
         self._add(part, new)
 
     def _add(self, part: str, actual: Actual) -> None:
         state = actual.state
         self._states[state] += 1
-        if state is State.UNKNOWN:
+        if state is _UNKNOWN:
             self._unknown.add(part)
-        mode = actual.mode if state is State.ACTIVE else None
-        for name, entry, place in self._by_part.get(part, ()):
-            mismatch = self._mismatch[name]
-            if state is entry.state and state is not State.UNKNOWN and mode == entry.mode:
+        mode = actual.mode if state is _ACTIVE else None
+        for mismatch, entry_state, entry_mode, place in self._by_part.get(part, ()):
+            if state is entry_state and state is not _UNKNOWN and mode == entry_mode:
                 mismatch.pop(place, None)
             else:
                 mismatch[place] = part
@@ -139,27 +143,27 @@ class Tally:
     def infer(self, target: StateMode | None, actual_of: Callable[[str], Actual]) -> Actual:
         """What ``infer_system`` would say, from the counts."""
         system = self.system
-        if self._states[State.ERRORPROCESSING]:
-            failing = next(p for p in system.parts if actual_of(p).state is State.ERRORPROCESSING)
-            return Actual(system.name, State.ERRORPROCESSING, reason=f"{failing} is in errorprocessing")
+        if self._states[_ERRORPROCESSING]:
+            failing = next(p for p in system.parts if actual_of(p).state is _ERRORPROCESSING)
+            return Actual(system.name, _ERRORPROCESSING, reason=f"{failing} is in errorprocessing")
         if self._unknown:
             relevant = relevant_parts(system, target)
             unknown = [p for p in system.parts if p in self._unknown and p in relevant]
             if unknown:
-                return Actual(system.name, State.UNKNOWN, reason=unknown_reason(map(actual_of, unknown)))
+                return Actual(system.name, _UNKNOWN, reason=unknown_reason(map(actual_of, unknown)))
         if target is None:
             return self._untargeted(actual_of)
-        if target.state is State.ACTIVE:
+        if target.state is _ACTIVE:
             wanted = target.mode if target.mode is not None and target.mode in system.modes else system.default_mode
             missing = self._mismatch[wanted]
             if not missing:
-                return Actual(system.name, State.ACTIVE, wanted)
+                return Actual(system.name, _ACTIVE, wanted)
             first = missing[min(missing)]
             reason = self._reason(wanted, first, actual_of(first))
             for name in self._modes_sorted:
                 if name != wanted and not self._mismatch[name]:
-                    return Actual(system.name, State.ACTIVATING, name, reason=reason)
-            return Actual(system.name, State.ACTIVATING, reason=reason)
+                    return Actual(system.name, _ACTIVATING, name, True, True, reason)  # positional: keywords cost more
+            return Actual(system.name, _ACTIVATING, None, True, True, reason)
         if self._states[target.state] == self._size:
             return Actual(system.name, target.state)
         moving = MOVING_TO.get(target.state)

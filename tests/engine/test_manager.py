@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from model_files import bundled, fixture
 
 import sm_bt
@@ -338,3 +340,20 @@ def test_the_outbox_knows_which_kinds_of_which_parts_are_wanted() -> None:
     assert all(outbox.wanted(kind, part) for kind in EventKind for part in ("a", "b", "c"))
     outbox.interest([])
     assert not any(outbox.wanted(kind, "a") for kind in EventKind)
+
+
+Wish = tuple[frozenset[str] | None, frozenset[EventKind] | None]  # a subscription's parts and kinds
+
+
+@given(st.lists(st.tuples(st.none() | st.frozensets(st.sampled_from("abcd"), max_size=3),
+                          st.none() | st.frozensets(st.sampled_from(list(EventKind)), max_size=3)), max_size=4))
+def test_the_parts_wanting_a_kind_are_those_wanted_one_by_one(wishes: list[Wish]) -> None:
+    """The set a loop over many parts asks once agrees with the question asked part by part."""
+    from sm_bt.engine.events import Outbox, Subscription
+
+    outbox = Outbox()
+    outbox.interest([Subscription(lambda event: None, parts, kinds, lambda s: None) for parts, kinds in wishes])
+    for kind in EventKind:
+        wanting = outbox.wanting(kind)
+        for part in "abcde":
+            assert (wanting is None or part in wanting) == outbox.wanted(kind, part), (kind, part)
