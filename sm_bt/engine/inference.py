@@ -32,6 +32,7 @@ __all__ = ["Actual", "Changes", "Inference", "NodeObservation", "infer_all", "in
 
 
 Changes = dict[str, tuple[Actual, Actual]]
+_ACTIVE = State.ACTIVE  # read once: an enum's member is slow to look up
 
 
 def node_mode_candidates(part: NodePart, target: StateMode | None) -> list[str]:
@@ -53,13 +54,13 @@ def infer_node(part: NodePart, obs: NodeObservation, target: StateMode | None,
     if obs.gone:
         return Actual(part.name, State.UNKNOWN, state_inferred=False, reason=obs.gone)
     state_inferred = not obs.lifecycle
-    if obs.state is not State.ACTIVE:
+    if obs.state is not _ACTIVE:
         # A node's mode only means something while it is active.
-        return Actual(part.name, obs.state, state_inferred=state_inferred, mode_inferred=False)
+        return Actual(part.name, obs.state, None, state_inferred, False)
     modes = part.modes
     for name in node_mode_candidates(part, target) if candidates is None else candidates:
         if modes[name].matches(obs.parameters):
-            return Actual(part.name, State.ACTIVE, name, state_inferred=state_inferred)
+            return Actual(part.name, _ACTIVE, name, state_inferred)
     return Actual(part.name, State.ACTIVE, None, state_inferred=state_inferred,
                   reason=_mode_mismatch(part, obs.parameters))
 

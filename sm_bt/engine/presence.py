@@ -25,6 +25,7 @@ from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import ParamValue, SystemPart
 
 log = logging.getLogger("sm_bt.manager")
+_FINALIZED = State.FINALIZED  # read once: an enum's member is slow to look up
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ class NodeReports:
         with self._serialiser:
             # Nothing leaves finalized: a finalized node heard in another state is a new process
             # (restarted too quickly to be seen gone in between).
-            reborn = self._inference.observation(node).state is State.FINALIZED and state is not State.FINALIZED
+            reborn = self._inference.observation(node).state is _FINALIZED and state is not _FINALIZED
             self._ledger.apply(self._inference.node_state(node, state))
             if reborn:
                 self._renew_budgets([node])
