@@ -203,29 +203,49 @@ class RosBackend:
         def fail(reason: str, refused: bool = False) -> None:
             self._dispatch(lambda: done(CallResult(False, reason, refused)))
 
-        def explained(response: Any) -> None:
-            # A transition that ran publishes transition events; one refused in the node's state
-            # does not. The extra round trip gives events sent before the answer time to arrive.
+        def explained(response: Any, asked_after: int) -> None:
+            # A transition that ran publishes its transition state (heard while ours was in flight,
+            # the extra round trip included); one refused in the node's state does not, and another
+            # transition's events (a late one's) do not count.
+            items = response.available_transitions
+            current = state_of(items[0].start_state.id) if items else None  # what the node is in
             with self._lock:
-                ran, state = peer.events != events_before, peer.state
+                discard(peer.transitions_in_flight, in_flight)
+                ran = step.via in seen if step is not None else peer.events != events_before
+                # The node's state as it answered, unless an event told something newer since.
+                told = current if peer.events == asked_after and peer.presence is Presence.PRESENT else None
+                if told is not None:
+                    peer.state = told
+                state, listener = peer.state, self._listener
+            if told is not None and listener is not None:
+                # A refusal says the last report was out of date, and the manager waits for the next
+                # one: this is it (the event that would have told it may never come).
+                self._dispatch(functools.partial(listener.node_state, peer.part, told))
             if ran:
                 fail(f"{transition.label} of {node} failed: its on_{transition.label} callback did not succeed "
                      f"(node now {state.label})")
                 return
-            available = sorted({item.transition.label for item in response.available_transitions})
+            available = sorted({item.transition.label for item in items})
             fail(f"{transition.label} of {node} refused: not a transition of its state {state.label} "
                  f"(available: {', '.join(available) or 'none'})", refused=True)
 
-        def answered(response: Any) -> None:
+        def unexplained(reason: str) -> None:
             with self._lock:
                 discard(peer.transitions_in_flight, in_flight)
+            fail(f"{transition.label} of {node} failed: the node answered success=false")
+
+        def answered(response: Any) -> None:
             if response.success:
+                with self._lock:
+                    discard(peer.transitions_in_flight, in_flight)
                 self._transition_confirmed(peer, transition, seen)
                 self._dispatch(lambda: done(CallResult(True)))
                 return
-            unexplained = f"{transition.label} of {node} failed: the node answered success=false"
+            with self._lock:
+                asked_after = peer.events
             self._calls.call(peer, peer.get_transitions, GetAvailableTransitions.Request(), "get_available_transitions",
-                             self.acquire_timeout, explained, lambda reason: fail(unexplained), busy=False)
+                             self.acquire_timeout, functools.partial(explained, asked_after=asked_after), unexplained,
+                             busy=False)
 
         def unanswered(reason: str) -> None:
             with self._lock:

@@ -124,6 +124,31 @@ def test_a_transition_the_node_refuses_fails_with_the_reason_and_the_node_keeps_
     assert str(pilot.manager.actual("amcl")) == "active.__DEFAULT__"
 
 
+def test_a_transition_refused_on_an_out_of_date_state_is_planned_again_from_the_state_the_node_gives(
+        node_processes: Starter) -> None:
+    """A refusal means the manager's view of the node was out of date, and it waits for the next
+    report: when no event will tell it (one lost on a busy machine), the refusal's own explanation
+    does, and the request goes on from there instead of waiting until it times out. (Liveness
+    probes would correct the state of the node they probe, one per process: not here.)"""
+    pilot = harness(node_processes("pilot"), backend_options={"probe_interval": 60.0})
+    try:
+        _refused_then_replanned(pilot)
+    finally:
+        pilot.close()
+
+
+def _refused_then_replanned(pilot: RosHarness) -> None:
+    backend = pilot.runtime.backend
+    assert pilot.manager.observation("amcl").state is State.UNCONFIGURED
+    # As a transition event that was never sent would leave it: the manager thinks amcl inactive.
+    backend._on_transition_event(backend._peer("amcl"), State.INACTIVE)
+    pilot.run_until(lambda: pilot.manager.observation("amcl").state is State.INACTIVE)
+    request = pilot.manager.change_mode("amcl", "__DEFAULT__")  # planned as one activate: refused
+    pilot.run_until(lambda: request.done, timeout=8.0)
+    assert request.succeeded, request.reason
+    assert str(pilot.manager.actual("amcl")) == "active.__DEFAULT__"
+
+
 def test_a_transition_whose_callback_fails_fails_the_request_with_the_reason(pilot: RosHarness) -> None:
     pilot.fail_next("amcl", Transition.CONFIGURE)
     request = pilot.manager.change_state("amcl", "configure")

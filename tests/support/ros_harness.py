@@ -29,11 +29,12 @@ DISCOVERY_LIMIT = 15.0
 class RosHarness:
     """``model``'s nodes in ``process`` (already READY), managed from this process."""
 
-    def __init__(self, model: Model, process: NodeProcess, **manager_options: Any) -> None:
+    def __init__(self, model: Model, process: NodeProcess, *, backend_options: dict[str, Any] | None = None,
+                 **manager_options: Any) -> None:
         self.process = process
         options = {**MANAGER_OPTIONS, **manager_options}
         self.runtime = RosRuntime(model, node_name="sm_bt_test_manager", manager_options=options,
-                                  backend_options=BACKEND_OPTIONS)
+                                  backend_options={**BACKEND_OPTIONS, **(backend_options or {})})
         self.manager = self.runtime.manager
         names = [node.name for node in model.nodes]
         self.run_until(lambda: all(self.manager.observation(n).reachable for n in names), DISCOVERY_LIMIT)
