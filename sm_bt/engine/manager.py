@@ -253,7 +253,9 @@ class ModeManager:
         if not mode:
             raise RequestError(f"change_mode of {part}: the mode name is empty (name a mode, or {DEFAULT_MODE} "
                                "for the default mode)")
-        with self._serial:
+        # A request's start is a plan, targets and calls for every node below the part, long-lived
+        # objects that the collector's passes would walk again and again meanwhile (sm_bt.model.gc_tuning).
+        with gc_paused(), self._serial:
             return self._request(part, StateMode(State.ACTIVE, mode), f"change_mode {part} {mode}", timeout,
                                  requester, on_failure, priority, queue)
 
@@ -268,7 +270,7 @@ class ModeManager:
         last mode asked for. :class:`RequestError` for a part the model does not have, or a
         transition that does not exist or cannot be requested; one not valid from where the part
         is now is a refused request. ``on_failure``, ``priority``, ``queue``: as :meth:`change_mode`'s."""
-        with self._serial:
+        with gc_paused(), self._serial:  # as change_mode's
             self._check_part(part)
             description, target, resolved, refusal = self._change_state_target(
                 part, transition, self._inference.actual(part).state, self._moving(part))

@@ -357,3 +357,21 @@ def test_the_parts_wanting_a_kind_are_those_wanted_one_by_one(wishes: list[Wish]
         wanting = outbox.wanting(kind)
         for part in "abcde":
             assert (wanting is None or part in wanting) == outbox.wanted(kind, part), (kind, part)
+
+
+def test_a_request_pauses_the_collector_while_it_starts_and_leaves_it_as_it_was(rig: SimulatedSystem) -> None:
+    import gc
+
+    seen: list[bool] = []
+    rig.manager.subscribe(lambda event: seen.append(gc.isenabled()), kinds=[EventKind.TARGET])
+    was = gc.isenabled()
+    try:
+        for enabled in (True, False):
+            (gc.enable if enabled else gc.disable)()
+            seen.clear()
+            rig.finish(rig.manager.change_mode("actuation", "PERFORMANCE" if enabled else "__DEFAULT__"))
+            rig.finish(rig.manager.change_state("actuation", "deactivate"))
+            assert seen and not any(seen)  # told inside the request's entry
+            assert gc.isenabled() is enabled
+    finally:
+        (gc.enable if was else gc.disable)()
