@@ -231,8 +231,10 @@ class Liveness:
             if probe.finished or peer.presence is not Presence.PRESENT or not self._listening():
                 return
             members = self.members(peer)
-            if any(member.busy for member in members):
-                return  # a change of ours in flight: its answers and events are the words to wait for
+            if self.working(peer):
+                return  # in a transition: nothing of the process answers until its callback returns
+            # A change of ours in flight is no reason to wait: its request may be the datagram lost
+            # (repaired at the next heartbeat, seconds later) while the process is idle and answers.
             heard = max(m.last_heard for m in members)
             deadline = heard + self.window(members)
             quiet = now - heard >= self.escalate_interval - SLACK
