@@ -17,7 +17,8 @@ What the reference manager does not do, and this backend does:
   all are present (``graph_interval`` for the services of present nodes: the costly part).
 * **Either path confirms.** A transition or parameter set of ours is done when its answer comes,
   or when the node's own events show it done (its goal state; every value applied), whichever is
-  first: over a lossy link each path is held back by its own lost datagrams only.
+  first: over a lossy link each path is held back by its own lost datagrams only. The events are
+  read in :mod:`sm_bt.ros.node_events`.
 * **Quick transitions are one step.** The transition state of a transition of ours (``configuring``)
   is reported only if the node is still in it ``VIA_GRACE`` s later: one that completes sooner
   goes straight to its goal, as it does when its answer comes before its events (the manager's view
@@ -53,34 +54,28 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_parameter_events
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
-from sm_bt.engine.clock import TimerHandle, WallClock
+from sm_bt.engine.clock import WallClock
 from sm_bt.engine.lifecycle import EDGE_OF, Transition
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import removable
-from sm_bt.ros.cdr import goal_state_id, parameter_event_node, parameter_event_values
 from sm_bt.ros.discovery import Discovery
 from sm_bt.ros.dispatch import Dispatcher
 from sm_bt.ros.liveness import Liveness
 from sm_bt.ros.node_calls import NodeCalls
-from sm_bt.ros.parameters import from_parameters
+from sm_bt.ros.node_events import NodeEvents
 from sm_bt.ros.peers import (
     ECHO_WINDOW,
-    SLACK,
     Link,
     Peer,
     Presence,
     SetInFlight,
     TransitionInFlight,
     discard,
-    expected_echo,
-    same_value,
     state_of,
 )
 from sm_bt.ros.requests import (
-    APPLIED,
     change_state_request,
-    deserialised,
     set_parameters_request,
     typed_items,
 )
@@ -132,9 +127,8 @@ class RosBackend:
                                     idle_poll_interval=idle_poll_interval, graph_interval=graph_interval)
         self._by_fqn: dict[str, Peer] = {}
         self._subscriptions: list[Any] = []
-        # Transition states of ours not reported yet: node -> (state, its event count, due).
-        self._held_back: dict[Peer, tuple[State, int, float]] = {}
-        self._held_timer: TimerHandle | None = None
+        self._events = NodeEvents(self._by_fqn, self._lock, self._clock, self._calls, self._dispatch,
+                                  lambda: self._listener)
 
     @property
     def clock(self) -> WallClock:
@@ -156,7 +150,7 @@ class RosBackend:
                 self._by_fqn[self._peers[name].fqn] = self._peers[name]
             self._subscriptions.append(removable.subscription(self._node, ParameterEvent, "/parameter_events",
                                                               functools.partial(self._heard,
-                                                                                self._on_raw_parameter_event),
+                                                                                self._events.on_raw_parameter_event),
                                                               qos_profile_parameter_events, raw=True))
         self._discovery.start()
 
@@ -164,10 +158,7 @@ class RosBackend:
         with self._lock:
             self._listener = None
             self._discovery.stop()
-            if self._held_timer is not None:
-                self._held_timer.cancel()
-                self._held_timer = None
-            self._held_back.clear()
+            self._events.stop()
             calls = [call for peer in self._peers.values() for call in peer.calls]
         for call in calls:
             self._calls.finish(call, failure="backend detached")
@@ -368,119 +359,6 @@ class RosBackend:
         for call, peer, reason in calls:
             self._calls.finish(call, failure=f"node {peer.part} vanished: {reason}")
 
-    # -- topics (executor thread) -------------------------------------------------------------------
-
-    def _on_raw_transition_event(self, peer: Peer, raw: bytes) -> None:
-        goal = goal_state_id(raw)  # see sm_bt.ros.cdr: what the message would cost to build
-        if goal is None:
-            message = deserialised(raw, TransitionEvent, peer.fqn)
-            if message is None:
-                return
-            goal = message.goal_state.id
-        self._on_transition_event(peer, state_of(goal))
-
-    def _on_transition_event(self, peer: Peer, state: State) -> None:
-        with self._lock:
-            peer.events += 1
-            now = peer.last_heard = peer.state_heard = self._clock.now()
-            if expected_echo(peer.state_echoes, state, now):
-                return  # a transition of ours, already reported from its answer
-            for in_flight in peer.transitions_in_flight:
-                in_flight.seen.append(state)
-            # Our transition reached its goal: the event tells as well as the answer would (over a
-            # lossy link, whichever of the two paths comes first).
-            reached = [t.call for t in peer.transitions_in_flight
-                       if t.goal is state and t.call is not None and not t.call.finished]
-            if peer.presence is Presence.ACQUIRING:
-                peer.buffered_state = state
-                return
-            report = peer.presence is Presence.PRESENT and state is not peer.state
-            if report:
-                peer.state = state
-                if any(t.via is state for t in peer.transitions_in_flight):
-                    report = False  # ours, on its way: told only if it lasts (see the module's doc)
-                    self._hold_back(peer, state, now)
-            listener = self._listener
-        if report and listener is not None:
-            self._dispatch(lambda: listener.node_state(peer.part, state))
-        for call in reached:
-            self._calls.finish(call, response=ChangeState.Response(success=True))
-
-    def _hold_back(self, peer: Peer, state: State, now: float) -> None:
-        """Report ``state`` of ``peer`` in ``VIA_GRACE`` s if nothing newer came (lock held)."""
-        self._held_back[peer] = (state, peer.events, now + VIA_GRACE)
-        if self._held_timer is None:
-            self._held_timer = self._clock.call_later(VIA_GRACE, self._report_held_back)
-
-    def _report_held_back(self) -> None:
-        """Clock thread: the transition states held back that still hold now."""
-        now = self._clock.now()
-        with self._lock:
-            self._held_timer = None
-            due = [(peer, state) for peer, (state, events, when) in self._held_back.items()
-                   if when <= now + SLACK and peer.events == events and peer.state is state
-                   and peer.presence is Presence.PRESENT]
-            self._held_back = {peer: held for peer, held in self._held_back.items()
-                               if held[2] > now + SLACK and peer.events == held[1]}
-            if self._held_back:
-                self._held_timer = self._clock.call_later(
-                    min(held[2] for held in self._held_back.values()) - now, self._report_held_back)
-            listener = self._listener
-        if listener is not None:
-            for peer, state in due:
-                self._dispatch(functools.partial(listener.node_state, peer.part, state))
-
-    def _on_raw_parameter_event(self, raw: bytes) -> None:
-        # See sm_bt.ros.cdr: another node's event costs its name only, ours no message objects.
-        node = parameter_event_node(raw)
-        if node is not None and node not in self._by_fqn:
-            return
-        values = parameter_event_values(raw) if node is not None else None
-        if node is None or values is None:  # not plain CDR: the usual way
-            message = deserialised(raw, ParameterEvent, "/parameter_events")
-            if message is None:
-                return
-            node = message.node
-            values = from_parameters(list(message.new_parameters) + list(message.changed_parameters))
-        peer = self._by_fqn.get(node)
-        if peer is not None:
-            self._on_parameter_event(peer, values)
-
-    def _on_parameter_event(self, peer: Peer, values: Mapping[str, ParamValue]) -> None:
-        """``values``: what an event of ``peer`` says it now holds (new and changed parameters)."""
-        changed = {name: value for name, value in values.items() if name in peer.parameter_names}
-        if not changed:
-            return
-        with self._lock:
-            now = peer.last_heard = self._clock.now()
-            changed = self._not_ours(peer, changed, now)
-            # A set of ours whose every value came back applied: the node took it (sets are atomic).
-            applied = [s.call for s in peer.sets_in_flight
-                       if s.call is not None and not s.call.finished and s.echoed >= s.values.keys()]
-            if changed and peer.presence is Presence.ACQUIRING:
-                peer.buffered_parameters.update(changed)
-            listener = self._listener if changed and peer.presence is Presence.PRESENT else None
-        for call in applied:
-            self._calls.finish(call, response=APPLIED)
-        if listener is not None:
-            self._dispatch(lambda: listener.node_parameters(peer.part, changed))
-
-    @staticmethod
-    def _not_ours(peer: Peer, changed: dict[str, ParamValue], now: float) -> dict[str, ParamValue]:
-        """The changes of a parameter event that are not echoes of our own sets (lock held)."""
-        others = {}
-        for name, value in changed.items():
-            if expected_echo(peer.echoes.get(name), value, now):
-                continue  # reported from the answer to our set
-            mine = next((s for s in peer.sets_in_flight
-                         if name not in s.echoed and same_value(s.values.get(name), value)), None)
-            if mine is not None:
-                mine.echoed.add(name)  # our set, answered soon: reported then
-                continue
-            peer.outside[name] = peer.outside.get(name, 0) + 1
-            others[name] = value
-        return others
-
     # -- helpers -------------------------------------------------------------------------------------
 
     def _make_peer(self, part: str) -> Peer:
@@ -500,7 +378,7 @@ class RosBackend:
         )
         peer.events_subscription = removable.subscription(
             node, TransitionEvent, f"{fqn}/transition_event",
-            functools.partial(self._heard, self._on_raw_transition_event, peer), QoSProfile(depth=10), raw=True)
+            functools.partial(self._heard, self._events.on_raw_transition_event, peer), QoSProfile(depth=10), raw=True)
         self._subscriptions.append(peer.events_subscription)
         return peer
 
@@ -525,9 +403,3 @@ class RosBackend:
         """An rclpy callback: ``handler(*args)``, then what it reported, in this thread."""
         with self._dispatcher.held():
             handler(*args)
-
-
-#: A transition state of a transition of ours is reported once the node stayed in it this long.
-VIA_GRACE = 0.05
-
-

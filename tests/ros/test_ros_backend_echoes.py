@@ -17,8 +17,9 @@ import pytest
 from sm_bt.engine.clock import VirtualClock
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.states import State
-from sm_bt.ros.backend import VIA_GRACE, RosBackend
+from sm_bt.ros.backend import RosBackend
 from sm_bt.ros.dispatch import Dispatcher
+from sm_bt.ros.node_events import VIA_GRACE, NodeEvents
 from sm_bt.ros.peers import ECHO_WINDOW, Peer, Presence, SetInFlight, TransitionInFlight, expected_echo
 
 pytestmark = pytest.mark.ros
@@ -44,8 +45,9 @@ def _backend() -> tuple[RosBackend, Peer, _Listener, VirtualClock]:
     backend._listener = listener  # type: ignore[assignment]
     backend._lock = threading.Lock()
     backend._dispatcher = Dispatcher(clock)
-    backend._held_back = {}
-    backend._held_timer = None
+    backend._by_fqn = {}
+    backend._events = NodeEvents(backend._by_fqn, backend._lock, clock, None, backend._dispatch,  # type: ignore[arg-type]
+                                 lambda: backend._listener)
     peer = Peer("amcl", "/amcl", ("alpha",), None, None, None, None, None, None, presence=Presence.PRESENT,
                  state=State.INACTIVE)
     return backend, peer, listener, clock
@@ -68,25 +70,25 @@ def test_late_echoes_of_two_confirmed_sets_are_not_reported() -> None:
     assert _answer(backend, peer, first) == {"alpha": 0.1}
     assert _answer(backend, peer, second) == {"alpha": 0.2}
     # The first set's echo arrives after the second was confirmed: it must not undo it.
-    assert backend._not_ours(peer, {"alpha": 0.1}, clock.now()) == {}
-    assert backend._not_ours(peer, {"alpha": 0.2}, clock.now()) == {}
+    assert backend._events._not_ours(peer, {"alpha": 0.1}, clock.now()) == {}
+    assert backend._events._not_ours(peer, {"alpha": 0.2}, clock.now()) == {}
     # Nothing is expected any more: the same value again is someone else's change.
-    assert backend._not_ours(peer, {"alpha": 0.2}, clock.now()) == {"alpha": 0.2}
+    assert backend._events._not_ours(peer, {"alpha": 0.2}, clock.now()) == {"alpha": 0.2}
 
 
 def test_an_echo_before_the_answer_is_not_expected_again() -> None:
     backend, peer, _, clock = _backend()
     in_flight = _send(peer, {"alpha": 0.3})
-    assert backend._not_ours(peer, {"alpha": 0.3}, clock.now()) == {}  # reported with the answer
+    assert backend._events._not_ours(peer, {"alpha": 0.3}, clock.now()) == {}  # reported with the answer
     assert _answer(backend, peer, in_flight) == {"alpha": 0.3}
-    assert backend._not_ours(peer, {"alpha": 0.3}, clock.now()) == {"alpha": 0.3}
+    assert backend._events._not_ours(peer, {"alpha": 0.3}, clock.now()) == {"alpha": 0.3}
 
 
 def test_a_change_by_someone_else_is_reported_and_wins_over_our_answer() -> None:
     backend, peer, _, clock = _backend()
     in_flight = _send(peer, {"alpha": 0.3})
-    assert backend._not_ours(peer, {"alpha": 0.3}, clock.now()) == {}  # our echo
-    assert backend._not_ours(peer, {"alpha": 0.9}, clock.now()) == {"alpha": 0.9}  # then another client
+    assert backend._events._not_ours(peer, {"alpha": 0.3}, clock.now()) == {}  # our echo
+    assert backend._events._not_ours(peer, {"alpha": 0.9}, clock.now()) == {"alpha": 0.9}  # then another client
     assert _answer(backend, peer, in_flight) == {}  # our answer must not report 0.3 over 0.9
 
 
@@ -94,7 +96,7 @@ def test_an_echo_expected_too_long_is_forgotten() -> None:
     backend, peer, _, clock = _backend()
     _answer(backend, peer, _send(peer, {"alpha": 0.4}))
     clock.advance(ECHO_WINDOW + 0.1)
-    assert backend._not_ours(peer, {"alpha": 0.4}, clock.now()) == {"alpha": 0.4}
+    assert backend._events._not_ours(peer, {"alpha": 0.4}, clock.now()) == {"alpha": 0.4}
 
 
 def test_a_confirmed_transition_is_reported_once_and_its_events_are_not() -> None:
@@ -155,29 +157,29 @@ def _activating(peer: Peer) -> None:
 def test_the_transition_state_of_a_quick_transition_of_ours_is_not_reported() -> None:
     backend, peer, listener, clock = _backend()
     _activating(peer)
-    backend._on_transition_event(peer, State.ACTIVATING)
+    backend._events.on_transition_event(peer, State.ACTIVATING)
     clock.advance(VIA_GRACE / 2)
     assert listener.states == [] and peer.state is State.ACTIVATING, "the backend knows; the manager waits"
-    backend._on_transition_event(peer, State.ACTIVE)
+    backend._events.on_transition_event(peer, State.ACTIVE)
     clock.advance(2 * VIA_GRACE)
     assert listener.states == [State.ACTIVE]
-    assert backend._held_back == {} and backend._held_timer is None
+    assert backend._events._held_back == {} and backend._events._held_timer is None
 
 
 def test_the_transition_state_of_a_slow_transition_of_ours_is_reported_once_it_lasts() -> None:
     backend, peer, listener, clock = _backend()
     _activating(peer)
-    backend._on_transition_event(peer, State.ACTIVATING)
+    backend._events.on_transition_event(peer, State.ACTIVATING)
     clock.advance(VIA_GRACE)
     assert listener.states == [State.ACTIVATING]
-    backend._on_transition_event(peer, State.ACTIVE)
+    backend._events.on_transition_event(peer, State.ACTIVE)
     clock.run_pending()
     assert listener.states == [State.ACTIVATING, State.ACTIVE]
 
 
 def test_a_transition_state_of_someone_elses_transition_is_reported_at_once() -> None:
     backend, peer, listener, clock = _backend()
-    backend._on_transition_event(peer, State.ACTIVATING)
+    backend._events.on_transition_event(peer, State.ACTIVATING)
     clock.run_pending()
     assert listener.states == [State.ACTIVATING]
 
@@ -189,18 +191,18 @@ def test_parameter_events_are_read_from_their_bytes_and_other_nodes_ones_dropped
     from sm_bt.ros.parameters import to_parameters
 
     backend, peer, listener, clock = _backend()
-    backend._by_fqn = {peer.fqn: peer}
+    backend._by_fqn[peer.fqn] = peer
 
     def event(node: str, values: dict[str, object], representation: bytes = b"") -> bytes:
         raw = bytes(serialize_message(ParameterEvent(node=node, changed_parameters=to_parameters(values))))  # type: ignore[arg-type]
         return representation + raw[len(representation):]
 
-    backend._on_raw_parameter_event(event("/planner", {"alpha": 0.5}))
-    backend._on_raw_parameter_event(event("/amcl", {"alpha": 0.5, "unmodelled": 1}))
+    backend._events.on_raw_parameter_event(event("/planner", {"alpha": 0.5}))
+    backend._events.on_raw_parameter_event(event("/amcl", {"alpha": 0.5, "unmodelled": 1}))
     clock.run_pending()
     assert listener.parameters == [("amcl", {"alpha": 0.5})], "someone else's change of ours, reported"
     # Bytes that are not plain CDR go the usual way: rclpy reads them, or they are dropped with a warning.
-    backend._on_raw_parameter_event(event("/amcl", {"alpha": 0.75}, b"\x00\x07"))
-    backend._on_raw_parameter_event(b"\x00\x07\x00\x00 not an event")
+    backend._events.on_raw_parameter_event(event("/amcl", {"alpha": 0.75}, b"\x00\x07"))
+    backend._events.on_raw_parameter_event(b"\x00\x07\x00\x00 not an event")
     clock.run_pending()
     assert listener.parameters[1:] == [("amcl", {"alpha": 0.75})]

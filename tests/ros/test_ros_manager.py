@@ -141,7 +141,7 @@ def _refused_then_replanned(pilot: RosHarness) -> None:
     backend = pilot.runtime.backend
     assert pilot.manager.observation("amcl").state is State.UNCONFIGURED
     # As a transition event that was never sent would leave it: the manager thinks amcl inactive.
-    backend._on_transition_event(backend._peer("amcl"), State.INACTIVE)
+    backend._events.on_transition_event(backend._peer("amcl"), State.INACTIVE)
     pilot.run_until(lambda: pilot.manager.observation("amcl").state is State.INACTIVE)
     request = pilot.manager.change_mode("amcl", "__DEFAULT__")  # planned as one activate: refused
     pilot.run_until(lambda: request.done, timeout=8.0)
