@@ -41,6 +41,7 @@ RSS_GOAL_MB = 1536.0  # 1.5 GB = 1.5 x 2^30 bytes
 #: A fault, the simulated backend's report included (µs), and its growth from 1,000 nodes.
 FAULT_GOAL_US, FAULT_GROWTH_GOAL = 50.0, 1.3
 FAULT_EVENTS, GROWTH_SIZE = 2000, 1000
+GROWTH_PROCESSES = 3  # of the small side: the median of their faults
 _ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -130,7 +131,11 @@ def _child(nodes: int, part: str) -> dict[str, float]:
 def run(quick: bool) -> list[Figure]:
     nodes = QUICK_SIZE if quick else SIZE
     ours = _child(nodes, "manager")
-    small = _child(GROWTH_SIZE if not quick else 100, "manager")
+    # The small side's fault moves between processes by more than the large side's (22.6-24 µs at
+    # 1,000 nodes, 30.2-30.6 µs at 100,000): the median of a few processes, each one's shown.
+    small_faults = [_child(GROWTH_SIZE if not quick else 100, "manager")["fault"]
+                    for _ in range(1 if quick else GROWTH_PROCESSES)]
+    small_fault = statistics.median(small_faults)
     libyaml = _child(nodes, "baseline")["csafeloader"]
     common: dict[str, Any] = {"N": nodes, "cpu": "process_time", "gc": "frozen once built (as sm-bt manager)"}
     goal = (lambda value: value) if not quick else (lambda value: None)
@@ -153,8 +158,9 @@ def run(quick: bool) -> list[Figure]:
         Figure("P3", f"fault event with the simulated backend's report, median, N={nodes}", ours["fault"] * 1e6, "µs",
                goal(FAULT_GOAL_US), details={**common, "events": FAULT_EVENTS, "clock": "perf_counter"}),
         Figure("P3", f"fault event growth, N={nodes} / N={GROWTH_SIZE if not quick else 100}",
-               ours["fault"] / small["fault"], "x", goal(FAULT_GROWTH_GOAL),
-               details={"small_us": round(small["fault"] * 1e6, 1), "large_us": round(ours["fault"] * 1e6, 1)}),
+               ours["fault"] / small_fault, "x", goal(FAULT_GROWTH_GOAL),
+               details={"small_us": round(small_fault * 1e6, 1), "large_us": round(ours["fault"] * 1e6, 1),
+                        "small_us_per_process": [round(fault * 1e6, 1) for fault in small_faults]}),
         Figure("P5", f"peak resident memory, N={nodes}", ours["peak_mb"], "MB", goal(RSS_GOAL_MB),
                details={**common, "what": "ru_maxrss of the process: text, load, manager, bring-up, change"}),
     ]
