@@ -61,8 +61,7 @@ def infer_node(part: NodePart, obs: NodeObservation, target: StateMode | None,
     for name in node_mode_candidates(part, target) if candidates is None else candidates:
         if modes[name].matches(obs.parameters):
             return Actual(part.name, _ACTIVE, name, state_inferred)
-    return Actual(part.name, State.ACTIVE, None, state_inferred=state_inferred,
-                  reason=_mode_mismatch(part, obs.parameters))
+    return Actual(part.name, _ACTIVE, None, state_inferred, True, _mode_mismatch(part, obs.parameters))
 
 
 def _mode_mismatch(part: NodePart, parameters: Mapping[str, ParamValue]) -> str:
