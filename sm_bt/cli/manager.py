@@ -91,16 +91,18 @@ def startup_lines(model: Model, nodes: bool = True) -> list[str]:
 
 def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None:
     """Run the manager node until ``stop`` is set."""
-    from sm_bt.ros.environment import RosUnavailable
+    from sm_bt.ros.environment import RECEIVE_ROOM_PROFILE, RosUnavailable, receive_room
 
     try:
         from sm_bt.ros.runtime import RosRuntime
 
-        runtime = RosRuntime(model, node_name=args.node_name, requester=args.requester,
-                             serve_nodes=args.serve == "all", manager_options={
-            "grace_period": args.grace_period, "request_timeout": args.request_timeout,
-            "recovery_attempts": args.recovery_attempts, "rules": not args.no_rules,
-            "recovery": not args.no_recovery, "on_failure": args.on_failure})
+        # This process is the manager's: room for a large change's burst of answers and events.
+        with receive_room() as roomy:
+            runtime = RosRuntime(model, node_name=args.node_name, requester=args.requester,
+                                 serve_nodes=args.serve == "all", manager_options={
+                "grace_period": args.grace_period, "request_timeout": args.request_timeout,
+                "recovery_attempts": args.recovery_attempts, "rules": not args.no_rules,
+                "recovery": not args.no_recovery, "on_failure": args.on_failure})
     except (RosUnavailable, ImportError) as error:
         raise RosMissing(str(error)) from None
     # The model and the manager's tables live as long as the process: keep them out of the garbage
@@ -111,6 +113,8 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
         from sm_bt.ros.environment import describe_discovery
 
         log.info("discovery: %s", describe_discovery())  # the first thing to check when nodes are not found
+        log.info("transports: %s", f"Fast DDS with sm_bt's receive room ({RECEIVE_ROOM_PROFILE})" if roomy
+                 else "the middleware's, as this environment sets them")
         lines = startup_lines(model, nodes=args.serve == "all")
         for line in lines[:STARTUP_LINES]:
             log.info(line)

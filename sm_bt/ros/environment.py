@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from importlib.resources import files
 
 from sm_bt.model.errors import Error
 
@@ -83,3 +86,41 @@ def require_ros() -> None:
         from system_modes_msgs.srv import ChangeMode  # noqa: F401
     except ImportError as error:
         raise RosUnavailable(f"ROS 2 is not available here ({error}): {INSTALL_HINT}") from None
+
+
+#: sm_bt's Fast DDS profile for a manager's process: a shared-memory port queue of 8192 samples
+#: instead of 512 (docs/ros-interface.md, "Receive room").
+RECEIVE_ROOM_PROFILE = str(files("sm_bt.ros") / "receive_room.xml")
+#: What decides a process's Fast DDS transports when set: then the user's settings stand.
+TRANSPORT_SETTINGS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
+                      "FASTDDS_BUILTIN_TRANSPORTS")
+#: The profile Fast DDS loads from the working directory when no variable names one.
+LOCAL_PROFILE = "DEFAULT_FASTRTPS_PROFILES.xml"
+#: The middlewares that read Fast DDS profiles (Jazzy's default is the first).
+FAST_DDS = ("rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")
+
+
+def receive_room_applies() -> bool:
+    """Whether :data:`RECEIVE_ROOM_PROFILE` may be used here: the middleware is Fast DDS and
+    nothing of the user's (:data:`TRANSPORT_SETTINGS`, :data:`LOCAL_PROFILE`) chooses its transports."""
+    return (os.environ.get("RMW_IMPLEMENTATION", "") or FAST_DDS[0]) in FAST_DDS \
+        and not any(os.environ.get(name) for name in TRANSPORT_SETTINGS) and not os.path.exists(LOCAL_PROFILE)
+
+
+@contextmanager
+def receive_room() -> Iterator[bool]:
+    """For the process that holds a manager, around its first ROS participant (``RosRuntime``'s
+    making): :data:`RECEIVE_ROOM_PROFILE` when :func:`receive_room_applies`; yields whether it does.
+
+    Fast DDS reads a profile once per process and applies it to every participant the process
+    makes, so only an executable whose process is the manager's may use this (``sm-bt manager``),
+    never a library call. The variable is unset again afterwards: processes started later keep
+    Fast DDS's defaults."""
+    if not receive_room_applies():
+        yield False
+        return
+    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = RECEIVE_ROOM_PROFILE
+    try:
+        yield True
+    finally:
+        os.environ.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
