@@ -7,10 +7,11 @@ The method is :mod:`bench.ros`'s (its helpers, and :mod:`bench.ros_baseline`'s p
 in a process of its own, used as they are); what differs is said here.
 
 In order: the 10 node processes start (at once); the embedded manager (``RosRuntime`` serving the
-system_modes interface, as ``sm-bt manager`` does; rules and recovery off, since the baseline moves
-the nodes behind its back) is made and finds every node; the baseline starts; then everything waits
-until the node and baseline processes are quiet: each new DDS entity is news to every participant,
-and a participant of thousands keeps the others busy for seconds after it is made.
+system_modes interface, as ``sm-bt manager`` does, with its receive room; rules and recovery off,
+since the baseline moves the nodes behind its back) is made and finds every node; the baseline
+starts; then everything waits until the node and baseline processes are quiet: each new DDS
+entity is news to every participant, and a participant of thousands keeps the others busy for
+seconds after it is made.
 
 * P1: a confirmed request of the manager against the same ``set_parameters_atomically`` /
   ``change_state`` calls sent by the baseline to all 200 nodes at once and awaited: (a) a
@@ -30,10 +31,10 @@ and a participant of thousands keeps the others busy for seconds after it is mad
 * Discovery (no goal): seconds from the manager's construction until it has every node, with
   the other start-up and the closing times in its details.
 
-The run takes 3-5 minutes on 2 cores: most of it is the manager's making and closing, and the
-answers and events that reach the manager about 3 s late while the baseline's process is up (any
-other participant with clients of the nodes' services does it; with Fast DDS's heartbeat period
-set from its default 3 s to 0.1 s they were gone: samples lost and resent after a heartbeat).
+The run takes 3-5 minutes on 2 cores, most of it the manager's making and closing. The baseline is
+raw rclpy with Fast DDS's defaults; the manager has ``sm-bt manager``'s receive room (without it,
+answers and events overflowed its shared-memory port in a change and came 3 s late:
+docs/ros-interface.md, "Receive room").
 """
 
 from __future__ import annotations
@@ -140,7 +141,7 @@ def _say(began: float, what: str) -> None:
 
 
 def run(quick: bool) -> list[Figure]:
-    from sm_bt.ros.environment import prepare, require_ros
+    from sm_bt.ros.environment import prepare, receive_room, require_ros
 
     prepare(own_domain=True)
     require_ros()
@@ -176,7 +177,9 @@ def run(quick: bool) -> list[Figure]:
             # services it found more than a second after their parameter services (the discovery of
             # 200 nodes at once on 2 cores) for nodes without lifecycle services.
             began = time.perf_counter()
-            runtime = RosRuntime(model, manager_options={"rules": False, "recovery": False})
+            with receive_room() as roomy:  # as sm-bt manager: this process is the manager's
+                runtime = RosRuntime(model, manager_options={"rules": False, "recovery": False})
+            timings["receive_room"] = float(roomy)
             timings["constructed_s"] = time.perf_counter() - began
             manager = runtime.manager
             wait_for(lambda: all(manager.observation(n).reachable for n in names), "the manager sees every node",
