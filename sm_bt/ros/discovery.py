@@ -25,7 +25,7 @@ from sm_bt.engine.backend import NodeReport
 from sm_bt.engine.clock import Clock, TimerHandle
 from sm_bt.model.states import State
 from sm_bt.model.types import ParamValue
-from sm_bt.ros.liveness import Liveness
+from sm_bt.ros.liveness import Liveness, host_of
 from sm_bt.ros.node_calls import NodeCalls
 from sm_bt.ros.parameters import from_parameter_value
 from sm_bt.ros.peers import Peer, Presence, state_of
@@ -81,6 +81,10 @@ class Discovery:
         # One graph query for all present nodes: `service_is_ready` walks the whole graph cache (about
         # 0.45 ms a call with 200 nodes on the graph), and two a node a look cost 18 % of a core idle.
         on_graph = self.graph_nodes() if graph else None
+        if graph and self._liveness.own_host is None:
+            own_host = host_of(self.own_participant())
+            with self._lock:
+                self._liveness.own_host = own_host
         for peer in peers:
             try:
                 self._look_at(peer, now, peer in probed, on_graph)
@@ -205,6 +209,17 @@ class Discovery:
                              lambda response: ask_parameters(state_of(response.current_state.id)), failed, busy=False)
         else:
             ask_parameters(State.ACTIVE)
+
+    def own_participant(self) -> bytes | None:
+        """The GUID prefix of the manager's own participant (its node's ``/rosout`` writer)."""
+        name, namespace = self._node.get_name(), self._node.get_namespace()
+        try:
+            for info in self._node.get_publishers_info_by_topic("/rosout"):
+                if info.node_name == name and info.node_namespace == namespace:
+                    return bytes(info.endpoint_gid[:12])
+        except Exception:  # as participant_of: without it, no silence is taken for a common one
+            log.debug("own participant not found", exc_info=True)
+        return None
 
     def participant_of(self, peer: Peer) -> bytes | None:
         """The GUID prefix of the DDS participant that publishes the node's events (its process)."""

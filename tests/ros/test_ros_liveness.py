@@ -184,9 +184,15 @@ def test_a_node_busy_in_a_long_transition_of_ours_is_not_taken_for_gone(
 
 
 def _vanished(manager: Any) -> list[str]:
-    """Every node-vanished event of ``manager`` from now on (a list that fills as they come)."""
+    """Every node of ``manager`` that becomes unknown from now on, as its event says it (a list that
+    fills as they come): a node out of reach is unknown, with the reason."""
+    from sm_bt.engine.events import EventKind
+
+    nodes = {node.name for node in manager.model.nodes}
     seen: list[str] = []
-    manager.subscribe(lambda event: seen.append(event.message) if "vanished" in event.message else None)
+    manager.subscribe(lambda event: seen.append(f"{event.message}: {manager.observation(event.part).gone}")
+                      if event.part in nodes and event.actual.state is State.UNKNOWN else None,
+                      kinds=(EventKind.ACTUAL,))
     return seen
 
 
@@ -221,6 +227,42 @@ def test_nodes_whose_transitions_take_seconds_are_busy_not_gone(
         assert all(not ros.backend.link(name).slow for name in names), [ros.backend.link(n) for n in names]
     finally:
         ros.close()
+
+
+def test_processes_of_this_host_silent_together_wait_for_the_common_cause_one_alone_is_judged(
+        node_processes: Starter, runtime: RosRuntime) -> None:
+    """One process of the manager's host frozen alone is judged within the window. Two frozen together
+    (as when a large participant leaves and every process hears of it for a second or two): no
+    verdict while both are silent for less than COMMON_CAP; frozen longer, both are judged then."""
+    from sm_bt.ros.liveness import COMMON_CAP
+
+    first = node_processes("pilot", "--state", "inactive", "--only", "amcl,controller_server", env=UDP_ONLY)
+    second = node_processes("pilot", "--state", "inactive", "--only", "pointcloud_to_laser,laser_resender",
+                            env=UDP_ONLY)
+    _reachable(runtime)
+    manager = runtime.manager
+    wait_until(lambda: runtime.backend._liveness.own_host is not None, 5.0, "the manager's own host not found")
+    with Stopped(second):
+        took = wait_until(lambda: not manager.observation("laser_resender").reachable, 5.0, "still reachable")
+        assert took <= WINDOW + LATENCY, f"one process alone unreachable after {took:.2f} s"
+        assert manager.observation("amcl").reachable
+    _reachable(runtime)
+    # A datagram sent to a frozen process is lost, and its path waits for the writer's heartbeat:
+    # the probes' paths are whole again a few seconds after a freeze.
+    time.sleep(3.0)
+    vanished = _vanished(manager)
+    with Stopped(first), Stopped(second):
+        time.sleep(2 * WINDOW)  # past the window, within the cap
+    time.sleep(2 * WINDOW)  # and a window after it: both answer again
+    assert vanished == [] and all(manager.observation(n).reachable for n in NODES), vanished
+    time.sleep(3.0)
+    with Stopped(first), Stopped(second) as stopped:
+        wait_until(lambda: not any(manager.observation(n).reachable for n in NODES), COMMON_CAP + 2.0,
+                   "still reachable")
+        # Silence counts from the last answer, up to a probe interval before the freeze.
+        took = time.monotonic() - stopped.at
+        assert COMMON_CAP - 0.4 <= took <= COMMON_CAP + 0.5 + LATENCY, f"both unreachable after {took:.2f} s"
+    assert len(vanished) == len(NODES), vanished  # the helper sees what it is for
 
 
 @pytest.mark.long
