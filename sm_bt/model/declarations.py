@@ -16,7 +16,11 @@ from sm_bt.model.rcl_yaml import YMap, YNode, YScalar, YSeq, describe
 from sm_bt.model.types import DEFAULT_MODE, DONT_CARE, PartKind
 
 PARAMS_KEY = "ros__parameters"
-_KNOWN_KEYS = ("type", "parts", "modes", "rules", "defaultmode", "match")
+_KNOWN_KEYS = ("type", "parts", "modes", "rules", "defaultmode", "match", "manager", "system")
+#: The keys that only a remote part has (sm_bt.model.remote_parts).
+REMOTE_KEYS = ("manager", "system")
+#: The type that makes a part remote: served by another manager, a node to this one.
+REMOTE_TYPE = "remote"
 # rmw_validate_node_name / rmw_validate_namespace: letters, digits, underscores; no leading digit.
 _NAME_SEGMENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
@@ -36,6 +40,7 @@ class PartDecl:
     parts_line: int = 0
     rules: YNode | None = None
     match: YNode | None = None
+    remote: bool = False  # type: remote (its kind is NODE)
 
     @property
     def mode_names(self) -> tuple[str, ...]:
@@ -133,7 +138,17 @@ def _read_keys(decl: PartDecl, diag: Diagnostics) -> None:
     decl.rules = rules[1] if rules else None
     match = decl.params.get("match")
     decl.match = match[1] if match else None
-    if decl.kind is PartKind.NODE and parts is not None:
+    if decl.remote:
+        for entry in (parts, match, rules):
+            if entry is not None:
+                diag.error(entry[0].line, f"remote part {decl.name!r} cannot have {entry[0].text!r}: its manager "
+                                          "holds its parts, parameters and rules; remove it")
+    elif decl.kind is not None:
+        for name in REMOTE_KEYS:
+            if (entry := decl.params.get(name)) is not None:
+                diag.error(entry[0].line, f"part {decl.name!r}: {name!r} is for a part another manager serves: "
+                                          f"remove it, or write 'type: {REMOTE_TYPE}'")
+    if decl.kind is PartKind.NODE and not decl.remote and parts is not None:
         diag.error(parts[0].line, f"node {decl.name!r} cannot have 'parts': remove it, or write "
                                   "'type: system' if this is a system")
     if decl.kind is PartKind.SYSTEM and match is not None:
@@ -151,9 +166,12 @@ def _read_kind(decl: PartDecl, diag: Diagnostics) -> PartKind | None:
     for kind in PartKind:
         if text == kind.value:
             return kind
-    hint = f"write {text.lower()!r} (lower-case)" if text.lower() in ("node", "system") else (
-        "write 'node' or 'system'")
-    diag.error(key.line, f"part {decl.name!r}: type {text!r} is neither 'node' nor 'system': {hint}")
+    if text == REMOTE_TYPE:
+        decl.remote = True
+        return PartKind.NODE
+    hint = f"write {text.lower()!r} (lower-case)" if text.lower() in ("node", "system", REMOTE_TYPE) else (
+        "write 'node', 'system' or 'remote'")
+    diag.error(key.line, f"part {decl.name!r}: type {text!r} is not 'node', 'system' or 'remote': {hint}")
     return None
 
 
@@ -165,6 +183,8 @@ def _read_modes(decl: PartDecl, diag: Diagnostics) -> YMap | None:
         return None
     key, modes = entry
     decl.modes_line = key.line
+    if decl.remote:
+        modes = _mode_list(decl, modes, diag)
     if not isinstance(modes, YMap):
         diag.error(key.line, f"'modes' of part {decl.name!r} must be a map of mode names, not "
                              f"{describe(modes)}")
@@ -177,6 +197,29 @@ def _read_modes(decl: PartDecl, diag: Diagnostics) -> YMap | None:
             diag.error(mode_key.line, f"{DONT_CARE} is reserved (it means 'leave the part as it is'): "
                                       "rename the mode")
     return modes
+
+
+def _mode_list(decl: PartDecl, value: YNode, diag: Diagnostics) -> YMap:
+    """A remote part's modes, as its manager names them: a YAML list (or names on lines, as
+    ``parts:``), made the map of names the other parts have (empty where a node has parameters)."""
+    if isinstance(value, YScalar):
+        words = value.text.split()
+        lines = value.word_lines if len(value.word_lines) == len(words) else (value.line,) * len(words)
+        names = [YScalar(word, word, line) for word, line in zip(words, lines, strict=True)]
+    elif isinstance(value, YSeq):
+        names = list(value.items)
+    else:
+        diag.error(value.line, f"'modes' of remote part {decl.name!r} lists the names of its modes, as its "
+                               f"manager names them (e.g. [{DEFAULT_MODE}, DEGRADED]), not a map")
+        return YMap((), value.line)
+    entries: dict[str, tuple[YScalar, YNode]] = {}
+    for name in names:
+        if name.text in entries:
+            diag.error(name.line, f"mode {name.text!r} of remote part {decl.name!r} is listed twice (first at "
+                                  f"line {entries[name.text][0].line}): remove one")
+        else:
+            entries[name.text] = (name, YMap((), name.line))
+    return YMap(tuple(entries.values()), value.line)
 
 
 def _read_default(decl: PartDecl, diag: Diagnostics) -> str | None:

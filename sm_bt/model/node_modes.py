@@ -21,6 +21,7 @@ from sm_bt.model.match_specs import (
     value_outside,
 )
 from sm_bt.model.rcl_yaml import YMap, YNode, YScalar, YSeq, describe, same_type, type_name
+from sm_bt.model.remote_parts import build_remote
 from sm_bt.model.types import EXACT, Location, NodeMode, NodePart, ParamSpec, ParamValue
 
 
@@ -41,6 +42,8 @@ class _RawMode:
 
 def build_node(decl: PartDecl, diag: Diagnostics) -> NodePart | None:
     """The node part, or ``None`` when it cannot be built (the reasons are reported)."""
+    if decl.remote:
+        return build_remote(decl, diag)
     if decl.modes is None:
         return None
     raw = [_read_mode(decl, key, value, diag) for key, value in decl.modes]

@@ -29,6 +29,11 @@ DEFAULT_MODE = "__DEFAULT__"
 DONT_CARE = "__DONTCARE__"
 
 
+#: The one parameter of a remote part: to the engine a remote part is a node whose parameter is the
+#: mode its manager reports, and whose modes each set it to their name (sm_bt.model.remote_parts).
+REMOTE_MODE = "__mode__"
+
+
 class PartKind(str, enum.Enum):
     """What a top-level entry of the model is."""
 
@@ -200,14 +205,30 @@ class Rule:
 
 
 @dataclass(frozen=True)
+class Remote:
+    """Where a remote part is served: the namespace of its manager's services (``""``: the root)
+    and the part's name in that manager's model."""
+
+    manager: str
+    system: str
+
+    @property
+    def fqn(self) -> str:
+        """The name its services hang from: ``/robot1/pilot`` has ``/robot1/pilot/change_mode``."""
+        return f"{self.manager}/{self.system}"
+
+
+@dataclass(frozen=True)
 class NodePart:
-    """A lifecycle node of the model, with its parameter modes (file order)."""
+    """A lifecycle node of the model, with its parameter modes (file order); or, with ``remote``, a
+    part another manager serves, seen as a node whose one parameter (:data:`REMOTE_MODE`) is its mode."""
 
     name: str
     default_mode: str
     modes: Mapping[str, NodeMode]
     rules: tuple[Rule, ...]
     location: Location
+    remote: Remote | None = None
     kind: PartKind = field(default=PartKind.NODE, init=False)
 
     @property

@@ -202,13 +202,13 @@ def test_missing_file_is_a_model_error() -> None:
     assert "cannot read the model file" in issue.message and "check the path" in issue.message
 
 
-def test_type_must_be_node_or_system() -> None:
+def test_type_must_be_node_system_or_remote() -> None:
     issue = one_error(edit("    type: node\n    modes:\n      __DEFAULT__:\n        ros__parameters:\n          rate",
                            "    type: Node\n    modes:\n      __DEFAULT__:\n        ros__parameters:\n          rate"))
     assert issue.location.line == 26
     assert "write 'node' (lower-case)" in issue.message
     issue = one_error(edit("    type: system\n", "    type: sytem\n"))
-    assert issue.location.line == 3 and "write 'node' or 'system'" in issue.message
+    assert issue.location.line == 3 and "write 'node', 'system' or 'remote'" in issue.message
 
 
 def test_missing_type_is_an_error() -> None:

@@ -199,7 +199,29 @@ PARAMETER_VALUES = _parameter_values()
 
 
 @st.composite
+def remote_part(draw: Any, name: str) -> Map:
+    """A part another manager serves: its modes a list of names (a map, now and then), its manager
+    and system names good or bad."""
+    listed = draw(MODE_LISTS)
+    form = draw(st.integers(0, 5))
+    modes: Node = (Map([(Scalar(mode), Map([])) for mode in listed]) if form == 0
+                   else Scalar(" ".join(listed), style="lines") if form == 1 and listed
+                   else Seq([Scalar(mode) for mode in listed], flow=draw(st.booleans())))
+    keys: list[tuple[Node, Node]] = [(Scalar("type"), Scalar(draw(st.sampled_from(("remote", "remote", "Remote"))))),
+                                     (Scalar("modes"), modes)]
+    for key, values in (("manager", ("/robot1", "/a/b", "robot1", "/", "/1x")), ("system", ("pilot", "a/b", "2x"))):
+        if draw(st.integers(0, 2)):
+            keys.append((Scalar(key), Scalar(draw(st.sampled_from(values)))))
+    if draw(st.integers(0, 7)) == 0:
+        keys.append((Scalar(draw(st.sampled_from(("parts", "match", "rules", "defaultmode")))),
+                     Scalar(draw(st.sampled_from(MODE_NAMES)))))
+    return Map([(Scalar("ros__parameters"), Map(keys))])
+
+
+@st.composite
 def node_part(draw: Any, name: str) -> Map:
+    if draw(st.integers(0, 7)) == 0:
+        return draw(remote_part(name))
     params = [f"p{index}" for index in range(draw(st.integers(0, 4)))] + draw(st.lists(NAMES, max_size=1))
     modes: list[tuple[Node, Node]] = []
     for mode in draw(MODE_LISTS):

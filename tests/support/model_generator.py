@@ -2,7 +2,7 @@
 
 :func:`generated_models` draws a :class:`GeneratedModel`: one top system over 1-3 levels of
 nested systems, 1-8 lifecycle nodes with 1-3 modes each (differing in a few int, float, string
-and bool parameters), 1-4 modes per system whose entries are ``active``, ``active.MODE``,
+and bool parameters; now and then a remote part instead, whose one parameter is its mode), 1-4 modes per system whose entries are ``active``, ``active.MODE``,
 ``inactive``, ``unconfigured`` or ``__DONTCARE__``, optional ``__order__`` stages, and rules: random
 ones, and the cascade of issue 10 (item 2), a sub-system's rule re-targeting it and a rule of its
 parent that reads the sub-system's mode. The result is SMH YAML text; every one must load with
@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from sm_bt.bundled import path as bundled_path
 from sm_bt.model.loader import load_model, load_model_text
 from sm_bt.model.states import State
-from sm_bt.model.types import Model, NodePart
+from sm_bt.model.types import REMOTE_MODE, Model, NodePart
 
 MODELS = Path(__file__).parents[1] / "models"
 Value = bool | int | float | str
@@ -59,6 +59,7 @@ class NodeSpec:
     name: str
     defaults: tuple[tuple[str, Value], ...]
     modes: tuple[tuple[str, tuple[tuple[str, Value], ...]], ...] = ()  # non-default modes: deltas
+    remote: bool = False  # type: remote; its parameters are then REMOTE_MODE's, as the model has them
 
 
 @dataclass(frozen=True)
@@ -134,6 +135,10 @@ def render(model: GeneratedModel) -> str:
                           f"        if_part: [{rule.if_part}, {rule.if_part_state}]",
                           f"        new_target: {rule.new_target}"]
     for node in model.nodes:
+        if node.remote:
+            lines += ["", f"{node.name}:", "  ros__parameters:", "    type: remote", f"    manager: /{node.name}",
+                      "    modes: [" + ", ".join(["__DEFAULT__", *(name for name, _ in node.modes)]) + "]"]
+            continue
         lines += ["", f"{node.name}:", "  ros__parameters:", "    type: node", "    modes:",
                   "      __DEFAULT__:", "        ros__parameters:"]
         lines += [f"          {name}: {yaml_value(value)}" for name, value in node.defaults]
@@ -188,6 +193,9 @@ _VALUES: dict[str, st.SearchStrategy[Value]] = {
 
 @st.composite
 def _node(draw: st.DrawFn, name: str) -> NodeSpec:
+    if draw(ints(0, 5)) == 0:
+        names = [f"M{index + 1}" for index in range(draw(ints(0, 2)))]
+        return NodeSpec(name, ((REMOTE_MODE, "__DEFAULT__"),), tuple((m, ((REMOTE_MODE, m),)) for m in names), True)
     kinds = draw(_KINDS)
     defaults = tuple((f"p{i}", draw(_VALUES[kind])) for i, kind in enumerate(kinds))
     modes = []
