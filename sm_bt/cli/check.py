@@ -24,7 +24,16 @@ from functools import partial
 from pathlib import Path
 from typing import TypeVar
 
-from sm_bt.cli.common import CliError, add_lenient, bundled_names, load_or_report, plural, print_issues, report_failed
+from sm_bt.cli.common import (
+    CliError,
+    add_lenient,
+    bundled_names,
+    load_or_report,
+    part_counts,
+    plural,
+    print_issues,
+    report_failed,
+)
 from sm_bt.model.types import Model, Severity
 from sm_bt.trees.stubs import Stub
 
@@ -115,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
             failed += 1
             continue
         models.append((name, model))
-        print(f"{name}: ok ({plural(len(model.systems), 'system')}, {plural(len(model.nodes), 'node')})")
+        print(f"{name}: ok ({part_counts(model)})")
         print_issues(model.warnings, sys.stdout)
         if args.reference:
             failed += not _guarded(name, args.debug, partial(_check_reference, model))

@@ -96,6 +96,13 @@ def plural(count: int, word: str) -> str:
     return f"{count} {word}" if count == 1 else f"{count} {word}s"
 
 
+def part_counts(model: Model) -> str:
+    """``1 system, 4 nodes`` (and ``, 2 remote parts`` where it has some)."""
+    remote = sum(node.remote is not None for node in model.nodes)
+    text = f"{plural(len(model.systems), 'system')}, {plural(len(model.nodes) - remote, 'node')}"
+    return text + (f", {plural(remote, 'remote part')}" if remote else "")
+
+
 def print_issues(issues: Sequence[ModelIssue], stream: TextIO) -> None:
     for issue in issues:
         print(issue, file=stream)

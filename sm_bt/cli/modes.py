@@ -8,7 +8,7 @@ import sys
 from collections.abc import Iterator
 
 from sm_bt.cli.arguments import non_negative
-from sm_bt.cli.common import add_lenient, bundled_names, load_or_report, plural, print_issues
+from sm_bt.cli.common import add_lenient, bundled_names, load_or_report, part_counts, print_issues
 from sm_bt.model.types import (
     DONT_CARE,
     EXACT,
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
 
 def describe_model(model: Model) -> Iterator[str]:
     """The hierarchy of ``model`` as plain-text lines (systems top-down, then every node)."""
-    yield f"model {model.path}: {plural(len(model.systems), 'system')}, {plural(len(model.nodes), 'node')}"
+    yield f"model {model.path}: {part_counts(model)}"
     shown: set[str] = set()
     for root in model.roots():
         part = model.parts[root]
@@ -59,7 +59,7 @@ def describe_model(model: Model) -> Iterator[str]:
             yield from _describe_system(model, part, 0, shown)
     if model.nodes:
         yield ""
-        yield "nodes"
+        yield "nodes and remote parts" if any(node.remote is not None for node in model.nodes) else "nodes"
     for node in model.nodes:
         yield from _describe_node(model, node, 1)
     yield ""
@@ -98,6 +98,10 @@ def _describe_node(model: Model, node: NodePart, depth: int) -> Iterator[str]:
     pad = "  " * depth
     parents = model.parents(node.name)
     where = f"part of {', '.join(parents)}" if parents else "in no system"
+    if node.remote is not None:  # its modes are names: its manager holds what they are
+        yield f"{pad}remote {node.name} ({node.remote.system} of the manager at {node.remote.manager or '/'}, {where})"
+        yield f"{pad}  modes: " + ", ".join(("*" if mode == node.default_mode else "") + mode for mode in node.modes)
+        return
     yield f"{pad}node {node.name} ({where})"
     yield f"{pad}  modes:"
     for mode in node.modes.values():

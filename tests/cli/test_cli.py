@@ -274,6 +274,28 @@ def test_modes_lists_every_node_with_full_parameter_sets(capsys: pytest.CaptureF
     assert logger > lines.index("  system sensors")
 
 
+def test_modes_and_check_show_remote_parts_by_their_manager_and_mode_names(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    path = tmp_path / "fleet.yaml"
+    path.write_text("fleet:\n  ros__parameters:\n    type: system\n    modes:\n      __DEFAULT__:\n"
+                    "        robot1: active\n        robot2: inactive\n"
+                    "robot1:\n  ros__parameters:\n    type: remote\n    manager: /robot1\n    system: pilot\n"
+                    "    modes: [__DEFAULT__, NIGHT]\n"
+                    "robot2:\n  ros__parameters:\n    type: remote\n    modes: [__DEFAULT__]\n")
+    code, out, err = run(capsys, "modes", path)
+    assert (code, err) == (0, "")
+    lines = out.splitlines()
+    assert lines[0] == f"model {path}: 1 system, 0 nodes, 2 remote parts"
+    start = lines.index("nodes and remote parts")
+    assert lines[start + 1:start + 5] == [
+        "  remote robot1 (pilot of the manager at /robot1, part of fleet)",
+        "    modes: *__DEFAULT__, NIGHT",
+        "  remote robot2 (robot2 of the manager at /, part of fleet)",
+        "    modes: *__DEFAULT__",
+    ]
+    assert run(capsys, "check", path)[1] == f"{path}: ok (1 system, 0 nodes, 2 remote parts)\n"
+
+
 def test_modes_error_handling(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     code, out, err = run(capsys, "modes", BAD)
     assert (code, out) == (1, "")
