@@ -34,6 +34,10 @@ def reference_issues(text: str, filename: str) -> list[ModelIssue]:
         return []
     found = _Found(filename)
     for decl in read_declarations(doc, diag).values():
+        if decl.remote:
+            found.error(decl.line, f"{decl.name}: the reference has no remote parts (it takes any type but 'node' "
+                                   "for a system): a model with remote parts is for sm_bt only")
+            continue
         _default_mode(decl, found)
         if decl.modes is None:
             continue

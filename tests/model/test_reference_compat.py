@@ -124,3 +124,12 @@ def test_the_bundled_pilot_names_its_order_line(name: str) -> None:
     errors = [issue for issue in reference_issues(text, str(path)) if issue.severity is Severity.ERROR]
     assert [issue.location.line for issue in errors] == [order_line]
     assert Path(errors[0].location.file) == path
+
+
+def test_a_remote_part_is_an_error_on_its_line() -> None:
+    text = system("      __DEFAULT__:\n        a: active\n        b: active\n        robot: active\n") + (
+        "robot:\n  ros__parameters:\n    type: remote\n    manager: /robot\n    modes: [__DEFAULT__]\n")
+    [(line, severity, message)] = findings(text)
+    assert (line, severity) == (24, Severity.ERROR)
+    assert message == ("reference: robot: the reference has no remote parts (it takes any type but 'node' for a "
+                       "system): a model with remote parts is for sm_bt only")
