@@ -94,6 +94,7 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
     from sm_bt.ros.environment import RECEIVE_ROOM_PROFILE, RosUnavailable, receive_room
 
     try:
+        from sm_bt.ros.backend import RemoteUnsupported
         from sm_bt.ros.runtime import RosRuntime
 
         # This process is the manager's: room for a large change's burst of answers and events.
@@ -105,6 +106,8 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
                 "recovery": not args.no_recovery, "on_failure": args.on_failure})
     except (RosUnavailable, ImportError) as error:
         raise RosMissing(str(error)) from None
+    except RemoteUnsupported as error:
+        raise CliError(str(error)) from None
     # The model and the manager's tables live as long as the process: keep them out of the garbage
     # collector's passes (at 10,000 nodes each full pass walked ~700,000 objects, ~0.5 s).
     freeze_long_lived()

@@ -56,6 +56,7 @@ from rclpy.qos import QoSProfile, qos_profile_parameter_events
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
 from sm_bt.engine.clock import WallClock
 from sm_bt.engine.lifecycle import EDGE_OF, Transition
+from sm_bt.model.errors import Error
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import removable
@@ -83,6 +84,20 @@ from sm_bt.ros.requests import (
 log = logging.getLogger("sm_bt.ros.backend")
 
 
+class RemoteUnsupported(Error, ValueError):
+    """The model has remote parts (``type: remote``), which this backend does not drive yet."""
+
+
+def refuse_remote(model: Model) -> None:
+    """Raise :class:`RemoteUnsupported`, naming them, if ``model`` has remote parts: they would
+    only ever be unknown here (nothing on the ROS graph has their name)."""
+    remote = [node.name for node in model.nodes if node.remote is not None]
+    if remote:
+        raise RemoteUnsupported(f"{model.path}: {', '.join(remote[:5])}{' ...' if len(remote) > 5 else ''}: remote "
+                                "parts are driven on the simulated backend only so far; run the model there "
+                                "(without --ros), or give those parts as the nodes or systems they are")
+
+
 class RosBackend:
     """The nodes of ``model``, reached through ``node`` (an rclpy node spun by an executor).
 
@@ -99,6 +114,7 @@ class RosBackend:
                  acquire_timeout: float = 2.0, probe_interval: float = 0.3, liveness_timeout: float = 0.9,
                  plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 1.0,
                  graph_interval: float = 1.0, escalate_interval: float = 0.05, watch_node: Node | None = None) -> None:
+        refuse_remote(model)
         self._node = node
         # The clients of discovery and liveness (get_state, get_parameters, ...) may live on a node
         # of their own, spun apart: the node of the calls that change nodes then wakes over fewer

@@ -100,10 +100,11 @@ class RosRuntime:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
 
-        from sm_bt.ros.backend import RosBackend
+        from sm_bt.ros.backend import RosBackend, refuse_remote
         from sm_bt.ros.diagnostics import DiagnosticsPublisher
         from sm_bt.ros.manager_node import ModeManagerServer
 
+        refuse_remote(model)  # before anything is made that would have to be closed
         self.model = model
         self._owns_node = node is None
         if node is None:

@@ -11,8 +11,10 @@ timeout, what to check), a change the manager fails (exit 1 at once, the manager
 from __future__ import annotations
 
 import re
+import signal
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 from ros_processes import ManagerProcess, RosContext, Starter
@@ -279,3 +281,27 @@ def test_a_dry_run_asks_the_manager_what_a_change_would_do_and_changes_nothing(
     # A node's change, through the same service of the node's part.
     code, out, _ = sm_bt(capsys, "mode", "set", "amcl", "__DEFAULT__", "--dry-run")
     assert code == 0 and out.startswith("change_mode amcl __DEFAULT__: 2 calls")
+
+
+def test_a_model_with_remote_parts_is_refused_on_ros_with_what_to_do(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Remote parts are driven on the simulated backend so far: the ROS backend says so at once,
+    before it makes anything, instead of showing them unknown for ever."""
+    from sm_bt.model import load_model
+    from sm_bt.ros.backend import RemoteUnsupported
+    from sm_bt.ros.runtime import RosRuntime
+
+    path = tmp_path / "fleet.yaml"
+    path.write_text("fleet:\n  ros__parameters:\n    type: system\n    modes:\n      __DEFAULT__:\n"
+                    "        robot1: active\nrobot1:\n  ros__parameters:\n    type: remote\n"
+                    "    manager: /robot1\n    system: pilot\n    modes: [__DEFAULT__]\n")
+    with pytest.raises(RemoteUnsupported, match="robot1: remote parts are driven on the simulated backend only"):
+        RosRuntime(load_model(path))
+    handlers = {number: signal.getsignal(number) for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        code, out, err = sm_bt(capsys, "manager", str(path))  # it installs its stop handlers first
+    finally:
+        for number, handler in handlers.items():
+            signal.signal(number, handler)
+    assert (code, out) == (1, "")
+    assert f"sm-bt: error: {path}: robot1: remote parts are driven on the simulated backend only so far" in err
