@@ -2,8 +2,9 @@
 
 :func:`generated_models` draws a :class:`GeneratedModel`: one top system over 1-3 levels of
 nested systems, 1-8 lifecycle nodes with 1-3 modes each (differing in a few int, float, string
-and bool parameters; now and then a remote part instead, whose one parameter is its mode), 1-4 modes per system whose entries are ``active``, ``active.MODE``,
-``inactive``, ``unconfigured`` or ``__DONTCARE__``, optional ``__order__`` stages, and rules: random
+and bool parameters; now and then a remote part instead, whose one parameter is its mode), 1-4
+modes per system whose entries are ``active``, ``active.MODE``, ``inactive``, ``unconfigured`` or
+``__DONTCARE__``, optional ``__order__`` stages, and rules: random
 ones, and the cascade of issue 10 (item 2), a sub-system's rule re-targeting it and a rule of its
 parent that reads the sub-system's mode. The result is SMH YAML text; every one must load with
 ``load_model_text(..., strict=True)``.
