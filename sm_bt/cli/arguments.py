@@ -56,3 +56,13 @@ def add_view_arguments(parser: argparse.ArgumentParser) -> None:
                              "as `sm-bt view --host`")
     parser.add_argument("--record", metavar="FILE.jsonl",
                         help="write the view's frames to FILE.jsonl; `sm-bt view FILE.jsonl` replays them")
+
+
+def namespace(text: str) -> str:
+    """A ROS 2 namespace for a robot's nodes and manager: ``/robot1`` (``/`` is the root)."""
+    from sm_bt.ros.names import valid_namespace
+
+    if not valid_namespace(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a ROS 2 namespace: write it absolute, with letters, "
+                                         "digits and underscores, e.g. /robot1")
+    return text

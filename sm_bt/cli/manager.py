@@ -20,7 +20,7 @@ import threading
 from types import FrameType
 from typing import Any
 
-from sm_bt.cli.arguments import non_negative, positive_int
+from sm_bt.cli.arguments import namespace, non_negative, positive_int
 from sm_bt.cli.common import CliError, load_or_report
 from sm_bt.model.errors import Error
 from sm_bt.model.gc_tuning import freeze_long_lived
@@ -43,6 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="MODEL", help="model file, or the name of a bundled model")
     parser.add_argument("--node-name", default="__mode_manager",
                         help="name of the manager's ROS node (default __mode_manager, as the reference)")
+    parser.add_argument("--namespace", type=namespace, default="/", metavar="NS",
+                        help="the robot's namespace: its nodes are looked for under it (/robot1/amcl), its parts "
+                             "served under it (/robot1/pilot/change_mode), as a robot of a fleet (default /)")
     parser.add_argument("--grace-period", type=non_negative, default=2.0, metavar="SECONDS",
                         help="how long a divergence lasts before rules and recovery act (default 2)")
     parser.add_argument("--request-timeout", type=non_negative, default=30.0, metavar="SECONDS",
@@ -76,16 +79,20 @@ def _policy(text: str) -> str:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def startup_lines(model: Model, nodes: bool = True) -> list[str]:
+def startup_lines(model: Model, nodes: bool = True, namespace: str = "/") -> list[str]:
     """What the manager serves, in the reference's start-up log format (``nodes``: theirs too)."""
+    from sm_bt.ros.names import qualified_name
+
     lines: list[str] = []
     for part in model.systems:
         lines.append(f"- system '{part.name}'")
-        lines.extend(f"  - /{part.name}/{name}" for name in ("change_state", "get_state", "get_available_states",
-                                                             "change_mode", "get_mode", "get_available_modes"))
+        base = qualified_name(part.name, namespace)
+        lines.extend(f"  - {base}/{name}" for name in ("change_state", "get_state", "get_available_states",
+                                                         "change_mode", "get_mode", "get_available_modes"))
     for node in model.nodes if nodes else ():
         lines.append(f"- node '{node.name}'")
-        lines.extend(f"  - /{node.name}/{name}" for name in ("change_mode", "get_mode", "get_available_modes"))
+        base = qualified_name(node.name, namespace)
+        lines.extend(f"  - {base}/{name}" for name in ("change_mode", "get_mode", "get_available_modes"))
     return lines
 
 
@@ -100,7 +107,7 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
         # This process is the manager's: room for a large change's burst of answers and events.
         with receive_room() as roomy:
             runtime = RosRuntime(model, node_name=args.node_name, requester=args.requester,
-                                 serve_nodes=args.serve == "all", manager_options={
+                                 serve_nodes=args.serve == "all", namespace=args.namespace, manager_options={
                 "grace_period": args.grace_period, "request_timeout": args.request_timeout,
                 "recovery_attempts": args.recovery_attempts, "rules": not args.no_rules,
                 "recovery": not args.no_recovery, "on_failure": args.on_failure})
@@ -118,7 +125,7 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
         log.info("discovery: %s", describe_discovery())  # the first thing to check when nodes are not found
         log.info("transports: %s", f"Fast DDS with sm_bt's receive room ({RECEIVE_ROOM_PROFILE})" if roomy
                  else "the middleware's, as this environment sets them")
-        lines = startup_lines(model, nodes=args.serve == "all")
+        lines = startup_lines(model, nodes=args.serve == "all", namespace=args.namespace)
         for line in lines[:STARTUP_LINES]:
             log.info(line)
         if len(lines) > STARTUP_LINES:

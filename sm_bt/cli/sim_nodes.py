@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from sm_bt.cli.arguments import non_negative
+from sm_bt.cli.arguments import namespace, non_negative
 from sm_bt.cli.common import CliError, UsageError, load_or_report
 
 
@@ -20,6 +20,8 @@ def _names(text: str) -> list[str]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", help="model file, or a bundled model name (pilot, actuation)")
     parser.add_argument("--only", type=_names, metavar="NAME,...", help="run only these nodes (default: all)")
+    parser.add_argument("--namespace", type=namespace, default="/", metavar="NS",
+                        help="put every node under this namespace, as a robot of a fleet (/robot1/amcl; default /)")
     parser.add_argument("--state", choices=("unconfigured", "inactive", "active"), default="unconfigured",
                         help="bring the lifecycle nodes to this state before READY")
     parser.add_argument("--parameters-only", type=_names, default=[], metavar="NAME,...",
@@ -52,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(error)) from None
     try:
         run_nodes(model, args.only, initial_state=args.state, parameters_only=args.parameters_only,
-                  transition_delay=args.transition_delay, single_threaded=args.single_threaded)
+                  transition_delay=args.transition_delay, single_threaded=args.single_threaded,
+                  namespace=args.namespace)
     except RefusedName as error:  # a part or parameter name ROS refuses
         raise CliError(f"{args.model}: {error}") from None
     except KeyboardInterrupt:  # a signal before our handlers were installed

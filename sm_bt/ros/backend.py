@@ -63,6 +63,7 @@ from sm_bt.ros import removable
 from sm_bt.ros.discovery import Discovery
 from sm_bt.ros.dispatch import Dispatcher
 from sm_bt.ros.liveness import Liveness
+from sm_bt.ros.names import qualified_name
 from sm_bt.ros.node_calls import NodeCalls
 from sm_bt.ros.node_events import NodeEvents
 from sm_bt.ros.peers import (
@@ -113,8 +114,11 @@ class RosBackend:
     def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
                  acquire_timeout: float = 2.0, probe_interval: float = 0.3, liveness_timeout: float = 0.9,
                  plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 1.0,
-                 graph_interval: float = 1.0, escalate_interval: float = 0.05, watch_node: Node | None = None) -> None:
+                 graph_interval: float = 1.0, escalate_interval: float = 0.05, watch_node: Node | None = None,
+                 namespace: str = "/") -> None:
         refuse_remote(model)
+        #: Where the model's nodes are: ``/robot1`` makes part ``amcl`` the node ``/robot1/amcl``.
+        self.namespace = namespace
         self._node = node
         # The clients of discovery and liveness (get_state, get_parameters, ...) may live on a node
         # of their own, spun apart: the node of the calls that change nodes then wakes over fewer
@@ -378,7 +382,7 @@ class RosBackend:
     # -- helpers -------------------------------------------------------------------------------------
 
     def _make_peer(self, part: str) -> Peer:
-        fqn = "/" + part.lstrip("/")
+        fqn = qualified_name(part, self.namespace)
         spec = self._model.part(part)
         if not isinstance(spec, NodePart):
             raise ValueError(f"{part} is a system of the model, not a node")

@@ -75,6 +75,7 @@ from sm_bt.model.states import State, StateMode
 from sm_bt.model.types import DEFAULT_MODE, SystemPart
 from sm_bt.ros import removable
 from sm_bt.ros.cdr import mode_event, transition_event
+from sm_bt.ros.names import qualified_name
 
 log = logging.getLogger("sm_bt.ros.manager_node")
 
@@ -100,8 +101,9 @@ class ModeManagerServer:
 
     def __init__(self, node: Node, manager: ModeManager,
                  on_request: Callable[[str, Request], None] | None = None, requester: str = "operator", *,
-                 nodes: bool = True) -> None:
+                 nodes: bool = True, namespace: str = "/") -> None:
         self._node = node
+        self.namespace = namespace  # the parts' services hang from it: /robot1/pilot/change_mode
         self._manager = manager
         self.requester = requester
         self._on_request = on_request  # told of every request made through the interface
@@ -140,7 +142,7 @@ class ModeManagerServer:
     # -- set-up --------------------------------------------------------------------------------------
 
     def _serve(self, part: str, system: bool) -> None:
-        base = "/" + part.lstrip("/")
+        base = qualified_name(part, self.namespace)
         node = self._node
 
         def service(kind: Any, name: str, answer: Callable[[Any, Any], Any]) -> None:

@@ -76,6 +76,9 @@ class RosRuntime:
     interface only, not each node's. ``own_domain`` is for self-contained runs (demo, tests): a
     per-run ``ROS_DOMAIN_ID`` and discovery on this machine unless set; otherwise the user's
     settings (and ROS's defaults) apply, so nodes and manager may run on different machines.
+    ``namespace`` is the robot's (``/robot1``): the model's nodes are looked for under it
+    (``/robot1/amcl``), its parts served under it (``/robot1/pilot/change_mode``), and the
+    manager's own node made in it; a robot of a fleet, beside others in one ROS domain.
 
     ``switch_interval``: if given, the interpreter's GIL switch interval (``sys.setswitchinterval``)
     while the runtime runs, put back by :meth:`close`; by default (``None``) the interpreter's own.
@@ -90,7 +93,7 @@ class RosRuntime:
                  own_domain: bool = False, manager_options: Mapping[str, Any] | None = None,
                  backend_options: Mapping[str, Any] | None = None, node: Any = None,
                  switch_interval: float | None = None, events_executor: bool = True,
-                 requester: str = "operator", serve_nodes: bool = True) -> None:
+                 requester: str = "operator", serve_nodes: bool = True, namespace: str = "/") -> None:
         self._switch_interval: tuple[float, float] | None = None
         if node is None:
             prepare(own_domain=own_domain, local_only=own_domain)
@@ -112,7 +115,7 @@ class RosRuntime:
             # No rclpy signal handlers: the owner of the process decides what SIGINT means (a
             # mission tree, sm-bt manager), and the shutdown order stays close()'s.
             rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-            self.node = rclpy.create_node(node_name, context=self.context)
+            self.node = rclpy.create_node(node_name, namespace=namespace, context=self.context)
         else:
             self.context = node.context
             self.node = node
@@ -143,7 +146,8 @@ class RosRuntime:
         # A change of a node may take as long as the request it serves: a node busy in a long
         # transition answers nothing meanwhile (see RosBackend).
         backing.setdefault("call_timeout", managing.get("request_timeout", REQUEST_TIMEOUT))
-        self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node, **backing)
+        self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node,
+                                  namespace=namespace, **backing)
         self.manager = ModeManager(model, self.backend, **managing)
         # The manager's view for operators and aggregators, with the interface it serves.
         self.diagnostics = DiagnosticsPublisher(self.node, self.manager, self.clock,
@@ -152,7 +156,7 @@ class RosRuntime:
         # decides against the holds of the manager's own users, a tree in this process).
         self.server = ModeManagerServer(self.node, self.manager,
                                         self.diagnostics.requested if self.diagnostics else None,
-                                        requester=requester, nodes=serve_nodes) if serve else None
+                                        requester=requester, nodes=serve_nodes, namespace=namespace) if serve else None
         if switch_interval is not None:
             self._switch_interval = (sys.getswitchinterval(), switch_interval)
             sys.setswitchinterval(switch_interval)

@@ -54,6 +54,7 @@ from rclpy.signals import SignalHandlerOptions
 from sm_bt.model.errors import Error
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import environment
+from sm_bt.ros.names import qualified_name, split_name
 
 PREFIX = "sim."
 TRANSITION_DELAY = "sim.transition_delay"
@@ -73,18 +74,6 @@ _SUCCESS = TransitionCallbackReturn.SUCCESS
 _OUTCOMES = {"failure": TransitionCallbackReturn.FAILURE, "error": TransitionCallbackReturn.ERROR}
 #: rclpy raises this (from its C extension) for a transition that is invalid in the current state.
 _RCLError: Any = rclpy_implementation.RCLError
-
-
-def split_name(part: str) -> tuple[str, str]:
-    """``(namespace, name)`` of a model part name: ``"left/gripper"`` -> ``("/left", "gripper")``."""
-    namespace, _, name = part.strip("/").rpartition("/")
-    return "/" + namespace, name
-
-
-def qualified_name(part: str) -> str:
-    """The node's fully qualified name: ``"/left/gripper"``, ``"/amcl"``."""
-    namespace, name = split_name(part)
-    return namespace.rstrip("/") + "/" + name
 
 
 def parse_fail_next(text: str) -> tuple[str, TransitionCallbackReturn] | None:
@@ -129,9 +118,9 @@ class SimulatedNode(LifecycleNode):
     """A model node as an rclpy lifecycle node, with the ``sim.*`` fault parameters (module doc)."""
 
     def __init__(self, part: NodePart, *, context: Context | None = None, transition_delay: float = 0.0,
-                 stop: threading.Event | None = None) -> None:
-        namespace, name = split_name(part.name)
-        super().__init__(name, namespace=namespace, context=context)
+                 stop: threading.Event | None = None, namespace: str = "/") -> None:
+        inner, name = split_name(part.name, namespace)
+        super().__init__(name, namespace=inner, context=context)
         self.part = part
         #: What ends a hung transition (sim.hang_next): the process's stop.
         self._stop = stop if stop is not None else threading.Event()
@@ -170,7 +159,7 @@ class SimulatedNode(LifecycleNode):
         for label in steps:
             outcome = getattr(self, f"trigger_{label}")()
             if outcome != _SUCCESS:
-                raise RuntimeError(f"{qualified_name(self.part.name)}: {label} returned {outcome} (now {self.state})")
+                raise RuntimeError(f"{self.get_fully_qualified_name()}: {label} returned {outcome} (now {self.state})")
 
     # -- transition callbacks ------------------------------------------------------------------
 
@@ -281,9 +270,9 @@ class SimulatedParameterNode(Node):
     """A model node as a plain rclpy node (no lifecycle services): its parameters and
     ``sim.reject_parameters``, for tests of nodes that are not managed."""
 
-    def __init__(self, part: NodePart, *, context: Context | None = None) -> None:
-        namespace, name = split_name(part.name)
-        super().__init__(name, namespace=namespace, context=context)
+    def __init__(self, part: NodePart, *, context: Context | None = None, namespace: str = "/") -> None:
+        inner, name = split_name(part.name, namespace)
+        super().__init__(name, namespace=inner, context=context)
         self.part = part
         declare_model_parameters(self, part)
         self.declare_parameter(REJECT_PARAMETERS, "", ParameterDescriptor(
@@ -333,12 +322,14 @@ def run_nodes(
     single_threaded: bool = False,
     ready: Callable[[list[str]], None] | None = print_ready,
     stop: threading.Event | None = None,
+    namespace: str = "/",
 ) -> None:
     """Run the model's nodes (``names``, default all) in this process until ``stop`` is set.
 
     The lifecycle nodes are first brought to ``initial_state``; ``ready`` then gets their fully
     qualified names (lifecycle first, then plain); ``transition_delay`` is every lifecycle node's
-    first ``sim.transition_delay``. ``single_threaded``: one executor thread for all the nodes, as in
+    first ``sim.transition_delay``; ``namespace`` puts every node under it (``/robot1/amcl``).
+    ``single_threaded``: one executor thread for all the nodes, as in
     rclcpp's component container, so that a node in a long transition holds up the others (by
     default each node has a thread). Without ``stop``, SIGINT and SIGTERM end the
     run (this needs the main thread). Shutdown order: executor, its thread, the nodes, the context.
@@ -363,10 +354,10 @@ def run_nodes(
     failure: list[BaseException] = []
     try:
         try:
-            lifecycle = [SimulatedNode(part, context=context, transition_delay=transition_delay, stop=stop)
-                         for part in lifecycle_parts]
+            lifecycle = [SimulatedNode(part, context=context, transition_delay=transition_delay, stop=stop,
+                                       namespace=namespace) for part in lifecycle_parts]
             nodes.extend(lifecycle)
-            nodes.extend(SimulatedParameterNode(part, context=context) for part in plain_parts)
+            nodes.extend(SimulatedParameterNode(part, context=context, namespace=namespace) for part in plain_parts)
         except (NameValidationException, ParameterException) as error:
             raise RefusedName(str(error)) from None
         for managed in lifecycle:
@@ -380,7 +371,7 @@ def run_nodes(
         spinner = threading.Thread(target=_spin, args=(executor, stop, failure), name="sim-nodes", daemon=True)
         spinner.start()
         if ready is not None:
-            ready([qualified_name(node.part.name) for node in nodes])
+            ready([qualified_name(node.part.name, namespace) for node in nodes])
         while not stop.wait(0.2):  # a timeout, so that signal handlers run promptly
             pass
     finally:
