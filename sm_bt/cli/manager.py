@@ -90,6 +90,9 @@ def startup_lines(model: Model, nodes: bool = True, namespace: str = "/") -> lis
         lines.extend(f"  - {base}/{name}" for name in ("change_state", "get_state", "get_available_states",
                                                          "change_mode", "get_mode", "get_available_modes"))
     for node in model.nodes if nodes else ():
+        if node.remote is not None:  # its manager serves it
+            lines.append(f"- remote part '{node.name}': {node.remote.fqn}, served by its own manager")
+            continue
         lines.append(f"- node '{node.name}'")
         base = qualified_name(node.name, namespace)
         lines.extend(f"  - {base}/{name}" for name in ("change_mode", "get_mode", "get_available_modes"))
@@ -101,7 +104,7 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
     from sm_bt.ros.environment import RECEIVE_ROOM_PROFILE, RosUnavailable, receive_room
 
     try:
-        from sm_bt.ros.backend import RemoteUnsupported
+        from sm_bt.ros.remote_parts import MixedModel
         from sm_bt.ros.runtime import RosRuntime
 
         # This process is the manager's: room for a large change's burst of answers and events.
@@ -113,7 +116,7 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
                 "recovery": not args.no_recovery, "on_failure": args.on_failure})
     except (RosUnavailable, ImportError) as error:
         raise RosMissing(str(error)) from None
-    except RemoteUnsupported as error:
+    except MixedModel as error:
         raise CliError(str(error)) from None
     # The model and the manager's tables live as long as the process: keep them out of the garbage
     # collector's passes (at 10,000 nodes each full pass walked ~700,000 objects, ~0.5 s).

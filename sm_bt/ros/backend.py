@@ -86,7 +86,8 @@ log = logging.getLogger("sm_bt.ros.backend")
 
 
 class RemoteUnsupported(Error, ValueError):
-    """The model has remote parts (``type: remote``), which this backend does not drive yet."""
+    """The model has remote parts (``type: remote``), which this backend does not drive: they are
+    other managers' systems (:class:`~sm_bt.ros.remote_parts.RemoteBackend`)."""
 
 
 def refuse_remote(model: Model) -> None:
@@ -95,8 +96,8 @@ def refuse_remote(model: Model) -> None:
     remote = [node.name for node in model.nodes if node.remote is not None]
     if remote:
         raise RemoteUnsupported(f"{model.path}: {', '.join(remote[:5])}{' ...' if len(remote) > 5 else ''}: remote "
-                                "parts are driven on the simulated backend only so far; run the model there "
-                                "(without --ros), or give those parts as the nodes or systems they are")
+                                "parts are driven by sm_bt.ros.remote_parts.RemoteBackend (RosRuntime picks it for "
+                                "a fleet's model), not by the nodes' backend")
 
 
 class RosBackend:

@@ -119,14 +119,17 @@ class ModeManagerServer:
         # The last published values, so each event carries its real start (and none repeats).
         self._modes: dict[str, str] = {}
         self._states: dict[str, State] = {}
-        served = [name for name, part in manager.model.parts.items() if nodes or isinstance(part, SystemPart)]
+        # A remote part's interface is its own manager's: served here, a name could be both.
+        served = [name for name, part in manager.model.parts.items()
+                  if isinstance(part, SystemPart) or (nodes and part.remote is None)]
         for name in served:
             self._serve(name, isinstance(manager.model.parts[name], SystemPart))
         with manager.lock:  # the current values first, then every change: none missed, none stale
             for name in served:
                 self._publish_actual(name, manager.actual(name))
             self._subscription: Subscription | None = manager.subscribe(
-                self._on_event, None if nodes else served, kinds=(EventKind.ACTUAL, EventKind.TARGET))
+                self._on_event, None if len(served) == len(manager.model.parts) else served,
+                kinds=(EventKind.ACTUAL, EventKind.TARGET))
 
     def close(self) -> None:
         if self._subscription is not None:

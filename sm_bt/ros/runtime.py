@@ -103,11 +103,12 @@ class RosRuntime:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
 
-        from sm_bt.ros.backend import RosBackend, refuse_remote
+        from sm_bt.ros.backend import RosBackend
         from sm_bt.ros.diagnostics import DiagnosticsPublisher
         from sm_bt.ros.manager_node import ModeManagerServer
+        from sm_bt.ros.remote_parts import RemoteBackend, check_fleet
 
-        refuse_remote(model)  # before anything is made that would have to be closed
+        fleet = check_fleet(model)  # before anything is made that would have to be closed
         self.model = model
         self._owns_node = node is None
         if node is None:
@@ -146,8 +147,13 @@ class RosRuntime:
         # A change of a node may take as long as the request it serves: a node busy in a long
         # transition answers nothing meanwhile (see RosBackend).
         backing.setdefault("call_timeout", managing.get("request_timeout", REQUEST_TIMEOUT))
-        self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node,
-                                  namespace=namespace, **backing)
+        self.backend: RosBackend | RemoteBackend
+        if fleet:  # its parts are other managers' systems: asked through their interface
+            self.backend = RemoteBackend(self.backend_node, model, clock=self.clock, **{
+                name: value for name, value in backing.items() if name in RemoteBackend.OPTIONS})
+        else:
+            self.backend = RosBackend(self.backend_node, model, clock=self.clock, watch_node=self.watch_node,
+                                      namespace=namespace, **backing)
         self.manager = ModeManager(model, self.backend, **managing)
         # The manager's view for operators and aggregators, with the interface it serves.
         self.diagnostics = DiagnosticsPublisher(self.node, self.manager, self.clock,

@@ -284,21 +284,24 @@ def test_a_dry_run_asks_the_manager_what_a_change_would_do_and_changes_nothing(
     assert code == 0 and out.startswith("change_mode amcl __DEFAULT__: 2 calls")
 
 
-def test_a_model_with_remote_parts_is_refused_on_ros_with_what_to_do(tmp_path: Path) -> None:
-    """Remote parts are driven on the simulated backend so far: the ROS backend says so at once,
-    before it makes anything, instead of showing them unknown for ever."""
+def test_a_model_with_remote_parts_and_nodes_is_refused_on_ros_with_what_to_do(tmp_path: Path) -> None:
+    """A fleet manager drives remote parts only: a model that mixes them with nodes is refused at
+    once, before anything is made, naming both."""
     from sm_bt.model import load_model
-    from sm_bt.ros.backend import RemoteUnsupported
+    from sm_bt.ros.remote_parts import MixedModel
     from sm_bt.ros.runtime import RosRuntime
 
     path = tmp_path / "fleet.yaml"
     path.write_text("fleet:\n  ros__parameters:\n    type: system\n    modes:\n      __DEFAULT__:\n"
-                    "        robot1: active\nrobot1:\n  ros__parameters:\n    type: remote\n"
-                    "    manager: /robot1\n    system: pilot\n    modes: [__DEFAULT__]\n")
-    with pytest.raises(RemoteUnsupported, match="robot1: remote parts are driven on the simulated backend only"):
+                    "        robot1: active\n        lamp: active\nrobot1:\n  ros__parameters:\n    type: remote\n"
+                    "    manager: /robot1\n    system: pilot\n    modes: [__DEFAULT__]\n"
+                    "lamp:\n  ros__parameters:\n    type: node\n    modes:\n      __DEFAULT__:\n"
+                    "        ros__parameters: {on: true}\n")
+    expected = "lamp are nodes beside the remote parts robot1: a fleet manager drives remote parts only"
+    with pytest.raises(MixedModel, match=expected):
         RosRuntime(load_model(path))
     # In a process of its own, as it runs: it sets up logging and signal handlers for its process.
     done = subprocess.run([sys.executable, "-m", "sm_bt.cli", "manager", str(path)], capture_output=True, text=True,
                           timeout=60)
     assert (done.returncode, done.stdout) == (1, "")
-    assert f"sm-bt: error: {path}: robot1: remote parts are driven on the simulated backend only so far" in done.stderr
+    assert f"sm-bt: error: {path}: {expected}" in done.stderr

@@ -1,0 +1,276 @@
+"""The ROS 2 backend of a fleet: remote parts driven through the system_modes interface of their managers.
+
+Each remote part (``type: remote``, :mod:`sm_bt.model.remote_parts`) is a system that another mode
+manager serves at ``Remote.fqn`` (``/robot1/pilot``): ``sm-bt manager`` in the robot's namespace,
+or the reference's ``mode_manager``. :class:`RemoteBackend` speaks to it as any client does:
+
+* a change of state is its ``change_state``, of mode its ``change_mode``; an answer ``success``
+  means accepted, and the change counts as done once its ``transition_event`` / ``mode_event``
+  says so (the reference sends those from a 1 s timer);
+* its state and mode are read with ``get_state``/``get_mode`` when it appears and after it was out
+  of reach (the heal), then followed on its events;
+* liveness: ``get_state`` every ``probe_interval`` s; no answer for ``liveness_timeout`` s makes it
+  out of reach ("no answer from the manager of robot1 ..."), and the fleet's rules react. While
+  out of reach it is asked again every probe; the first answer is its reappearance.
+
+Every call has a timeout. Calls and reports run on the backend's node and clock; the listener is
+never called with this backend's lock held.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from lifecycle_msgs.msg import Transition as TransitionMessage
+from lifecycle_msgs.msg import TransitionEvent
+from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from system_modes_msgs.msg import ModeEvent
+from system_modes_msgs.srv import ChangeMode, GetMode
+
+from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
+from sm_bt.engine.clock import WallClock
+from sm_bt.engine.lifecycle import Transition
+from sm_bt.model.errors import Error
+from sm_bt.model.states import State
+from sm_bt.model.types import REMOTE_MODE, Model, ParamValue
+from sm_bt.ros.peers import Link, state_of
+
+log = logging.getLogger("sm_bt.ros.remote_parts")
+
+#: The managers' events are latched (sm-bt manager's; the reference's are volatile, and a latched
+#: reader still matches them).
+_EVENTS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+class MixedModel(Error, ValueError):
+    """A model with both remote parts and nodes: a fleet manager's parts are remote ones only."""
+
+
+def check_fleet(model: Model) -> bool:
+    """Whether ``model`` is a fleet's (its nodes are all remote parts); :class:`MixedModel` when only
+    some are."""
+    remote = [part.name for part in model.nodes if part.remote is not None]
+    local = [part.name for part in model.nodes if part.remote is None]
+    if remote and local:
+        raise MixedModel(f"{model.path}: {', '.join(local[:5])}{' ...' if len(local) > 5 else ''} are nodes beside "
+                         f"the remote parts {', '.join(remote[:5])}: a fleet manager drives remote parts only; put "
+                         "the nodes in a robot's model, served by that robot's manager")
+    return bool(remote)
+
+
+@dataclass
+class _Robot:
+    part: str
+    fqn: str
+    change_state: Any
+    get_state: Any
+    change_mode: Any
+    get_mode: Any
+    subscriptions: list[Any] = field(default_factory=list)
+    present: bool = False
+    last_heard: float = float("-inf")
+    probing: bool = False
+    state: State = State.UNKNOWN
+    mode: str = ""
+
+
+class RemoteBackend:
+    """Drives ``model``'s remote parts (all its nodes must be remote parts) through their managers."""
+
+    #: The keyword options it takes (of those RosRuntime's ``backend_options`` may hold).
+    OPTIONS = frozenset({"call_timeout", "probe_interval", "liveness_timeout"})
+
+    def __init__(self, node: Node, model: Model, *, clock: WallClock | None = None, call_timeout: float = 10.0,
+                 probe_interval: float = 0.3, liveness_timeout: float = 0.9) -> None:
+        if not check_fleet(model) and model.nodes:
+            raise MixedModel(f"{model.path}: it has no remote parts: its nodes are RosBackend's")
+        self._node = node
+        self._clock = clock if clock is not None else WallClock("sm_bt-remote-clock")
+        self.call_timeout = call_timeout
+        self.probe_interval = probe_interval
+        self.liveness_timeout = liveness_timeout
+        self._lock = threading.Lock()
+        self._listener: BackendListener | None = None
+        self._robots: dict[str, _Robot] = {}
+        for part in model.nodes:
+            assert part.remote is not None
+            fqn = part.remote.fqn
+            self._robots[part.name] = _Robot(
+                part.name, fqn, node.create_client(ChangeState, f"{fqn}/change_state"),
+                node.create_client(GetState, f"{fqn}/get_state"), node.create_client(ChangeMode, f"{fqn}/change_mode"),
+                node.create_client(GetMode, f"{fqn}/get_mode"))
+
+    @property
+    def clock(self) -> WallClock:
+        return self._clock
+
+    def link(self, part: str) -> Link:
+        """How the robot's manager answers: probed, with the liveness window (no round-trip estimate)."""
+        return Link(None, self.liveness_timeout, False)
+
+    # -- the backend protocol ---------------------------------------------------------------------------
+
+    def attach(self, nodes: Sequence[str], listener: BackendListener) -> None:
+        with self._lock:
+            self._listener = listener
+        for name in nodes:
+            self._follow(self._robots[name])
+
+    def _follow(self, robot: _Robot) -> None:
+        """Its events, and the first probe (which reads it)."""
+        robot.subscriptions = [
+            self._node.create_subscription(TransitionEvent, f"{robot.fqn}/transition_event",
+                                           lambda message: self._transition_event(robot, message), _EVENTS),
+            self._node.create_subscription(ModeEvent, f"{robot.fqn}/mode_event",
+                                           lambda message: self._mode_event(robot, message), _EVENTS)]
+        self._clock.call_later(0.0, lambda: self._probe(robot))
+
+    def detach(self) -> None:
+        with self._lock:
+            self._listener = None
+        for robot in self._robots.values():
+            for subscription in robot.subscriptions:
+                self._node.destroy_subscription(subscription)
+            robot.subscriptions = []
+
+    def change_state(self, node: str, transition: Transition, done: Done) -> None:
+        robot = self._robots[node]
+        message = TransitionMessage(id=int(transition.value), label=transition.label)
+        refused = CallResult(False, f"the manager of {node} refused {transition.label}", refused=True)
+        label = f"change_state {transition.label}"
+        self._call(robot, robot.change_state, ChangeState.Request(transition=message), label,
+                   lambda response: done(CallResult(True) if response.success else refused),
+                   lambda why: done(CallResult(False, why)))
+
+    def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
+        robot = self._robots[node]
+        mode = parameters.get(REMOTE_MODE)
+        if not isinstance(mode, str) or set(parameters) != {REMOTE_MODE}:
+            self._clock.call_later(0.0, lambda: done(CallResult(False, f"{node} is a remote part: only its mode "
+                                                                         "can be asked")))
+            return
+        refused = CallResult(False, f"the manager of {node} refused mode {mode}")
+        self._call(robot, robot.change_mode, ChangeMode.Request(mode_name=mode), f"change_mode {mode}",
+                   lambda response: done(CallResult(True) if response.success else refused),
+                   lambda why: done(CallResult(False, why)))
+
+    # -- liveness and reading ------------------------------------------------------------------------------
+
+    def _probe(self, robot: _Robot) -> None:
+        with self._lock:
+            if self._listener is None:
+                return
+            silent = robot.present and self._clock.now() - robot.last_heard > self.liveness_timeout
+            if silent:
+                robot.present = False
+            asking = not robot.probing
+            robot.probing = robot.probing or asking
+        if silent:
+            self._report(lambda listener: listener.node_vanished(
+                robot.part, f"no answer from the manager of {robot.part} ({robot.fqn}) for "
+                            f"{self.liveness_timeout:g} s (it exited, or the network is cut)"))
+        if asking:
+            self._call(robot, robot.get_state, GetState.Request(), "get_state (liveness)",
+                       lambda response: self._state_answer(robot, state_of(response.current_state.id)),
+                       lambda why: self._probe_failed(robot), timeout=self.liveness_timeout)
+        self._clock.call_later(self.probe_interval, lambda: self._probe(robot))
+
+    def _probe_failed(self, robot: _Robot) -> None:
+        with self._lock:
+            robot.probing = False
+
+    def _state_answer(self, robot: _Robot, state: State) -> None:
+        with self._lock:
+            robot.probing = False
+            robot.last_heard = self._clock.now()
+            appearing = not robot.present and state is not State.UNKNOWN
+        if state is State.UNKNOWN:
+            self._unknown(robot)
+        elif appearing:  # at start, or after it was out of reach: read its mode too, then report it
+            self._call(robot, robot.get_mode, GetMode.Request(), "get_mode",
+                       lambda response: self._appear(robot, state, str(response.current_mode)), lambda why: None)
+
+    def _unknown(self, robot: _Robot) -> None:
+        """Its manager answers, but does not know where its part is (its own nodes out of reach): out
+        of reach for the fleet too, and read afresh once its manager knows (its events will not
+        repeat a mode it had before)."""
+        with self._lock:
+            was = robot.present
+            robot.present = False
+        if was:
+            self._report(lambda listener: listener.node_vanished(
+                robot.part, f"the manager of {robot.part} does not know where {robot.fqn} is"))
+
+    def _appear(self, robot: _Robot, state: State, mode: str) -> None:
+        if mode == "unknown":  # not known yet after all: the next probe reads it again
+            return
+        with self._lock:
+            if robot.present or self._listener is None:
+                return
+            robot.present, robot.state, robot.mode = True, state, mode
+            robot.last_heard = self._clock.now()
+        self._report(lambda listener: listener.node_appeared(robot.part, NodeReport(state, {REMOTE_MODE: mode})))
+
+    def _transition_event(self, robot: _Robot, message: Any) -> None:
+        state = state_of(message.goal_state.id)
+        if state is State.UNKNOWN:
+            self._unknown(robot)
+            return
+        with self._lock:
+            robot.last_heard = self._clock.now()
+            changed = robot.present and state is not robot.state
+            robot.state = state if robot.present else robot.state
+        if changed:
+            self._report(lambda listener: listener.node_state(robot.part, state))
+
+    def _mode_event(self, robot: _Robot, message: Any) -> None:
+        mode = str(message.goal_mode.label)
+        with self._lock:
+            robot.last_heard = self._clock.now()
+            changed = robot.present and mode != robot.mode
+            robot.mode = mode if robot.present else robot.mode
+        if changed:
+            self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
+
+    # -- calls ------------------------------------------------------------------------------------------------
+
+    def _call(self, robot: _Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
+              failed: Callable[[str], None], timeout: float | None = None) -> None:
+        """``request`` on ``client``: ``answered(response)``, or ``failed(why)`` once ``timeout`` passed."""
+        if not client.service_is_ready():
+            self._clock.call_later(0.0, lambda: failed(f"{robot.fqn}: no manager serves it ({label})"))
+            return
+        future = client.call_async(request)
+        finished = threading.Event()
+
+        def on_done(_: Any) -> None:
+            if finished.is_set():
+                return
+            finished.set()
+            response = future.result()
+            with self._lock:
+                robot.last_heard = self._clock.now()
+            answered(response)
+
+        def on_timeout() -> None:
+            if finished.is_set():
+                return
+            finished.set()
+            client.remove_pending_request(future)
+            failed(f"the manager of {robot.part} did not answer {label} within {limit:g} s")
+
+        limit = timeout if timeout is not None else self.call_timeout
+        future.add_done_callback(on_done)
+        self._clock.call_later(limit, on_timeout)
+
+    def _report(self, tell: Callable[[BackendListener], None]) -> None:
+        listener = self._listener
+        if listener is not None:
+            tell(listener)
+

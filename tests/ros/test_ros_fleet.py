@@ -1,0 +1,101 @@
+"""A fleet manager over real ROS 2: its remote parts are robots, each the pilot's four nodes with its
+own ``sm-bt manager`` in a namespace of its own; the fleet asks them through their system_modes
+interface and follows their events (sm_bt.ros.remote_parts)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from ros_processes import ManagerProcess, RosContext, Starter, wait_until
+from system_modes_msgs.srv import GetMode
+
+from sm_bt.model import load_model
+from sm_bt.model.states import State
+from sm_bt.ros.runtime import RosRuntime
+
+pytestmark = pytest.mark.ros
+
+FLEET = """\
+fleet:
+  ros__parameters:
+    type: system
+    modes:
+      __DEFAULT__:
+        robot1: active
+        robot2: active
+      NIGHT:
+        robot1: active.f_energy_saving_mode
+        robot2: inactive
+robot1:
+  ros__parameters:
+    type: remote
+    manager: /robot1
+    system: pilot
+    modes: [__DEFAULT__, f_energy_saving_mode, f_degraded_mode]
+robot2:
+  ros__parameters:
+    type: remote
+    manager: /robot2
+    system: pilot
+    modes: [__DEFAULT__, f_energy_saving_mode, f_degraded_mode]
+"""
+#: The fleet's liveness window and probe interval (RemoteBackend's defaults), and what the verdict
+#: may take beyond them on a loaded machine.
+WINDOW, PROBE, LATENCY = 0.9, 0.3, 0.3
+
+
+@pytest.fixture
+def fleet(tmp_path: Path) -> Iterator[RosRuntime]:
+    path = tmp_path / "fleet.yaml"
+    path.write_text(FLEET)
+    runtime = RosRuntime(load_model(path), node_name="fleet_manager", manager_options={"request_timeout": 20.0})
+    yield runtime
+    runtime.close()
+
+
+def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
+        fleet: RosRuntime) -> None:
+    managers = {name: start_manager("--namespace", f"/{name}") for name in ("robot1", "robot2")}
+    for name in managers:
+        node_processes("pilot", "--namespace", f"/{name}", "--state", "inactive")
+    for manager in managers.values():
+        manager.ready()
+    fleet_manager = fleet.manager
+    wait_until(lambda: all(fleet_manager.actual(r).state is State.INACTIVE for r in managers), 20.0,
+               "the fleet never read its robots")
+    up = fleet_manager.change_mode("fleet", "__DEFAULT__")
+    wait_until(lambda: up.done, 20.0, "the fleet's bring-up did not end")
+    assert up.succeeded, up.reason
+    night = fleet_manager.change_mode("fleet", "NIGHT")
+    wait_until(lambda: night.done, 20.0, "the fleet's switch did not end")
+    assert night.succeeded, night.reason
+    # Each robot's own manager did it: its interface says so.
+    mode = ros_context.call(GetMode, "/robot1/pilot/get_mode", GetMode.Request(), 5.0).current_mode
+    assert mode == "f_energy_saving_mode"
+    assert str(fleet_manager.actual("robot1")) == "active.f_energy_saving_mode"
+    assert fleet_manager.actual("robot2").state is State.INACTIVE
+    assert str(fleet_manager.actual("fleet")) == "active.NIGHT"
+
+    # Robot1's manager stops answering (frozen): unknown at the fleet within the window.
+    robot1 = managers["robot1"].process
+    assert robot1 is not None
+    os.kill(robot1.pid, signal.SIGSTOP)
+    try:
+        stopped = time.monotonic()
+        wait_until(lambda: fleet_manager.actual("robot1").state is State.UNKNOWN, 5.0, "robot1 never unknown")
+        took = time.monotonic() - stopped
+        assert took <= WINDOW + PROBE + LATENCY, f"robot1 unknown {took:.2f} s after its manager froze"
+        assert "no answer from the manager of robot1 (/robot1/pilot)" in fleet_manager.observation("robot1").gone
+        assert fleet_manager.actual("robot2").state is State.INACTIVE
+    finally:
+        os.kill(robot1.pid, signal.SIGCONT)
+    # Healed: read afresh, and the fleet is consistent with the robot again.
+    wait_until(lambda: str(fleet_manager.actual("robot1")) == "active.f_energy_saving_mode", 10.0,
+               "robot1 never read again")
+    assert str(fleet_manager.actual("fleet")) == "active.NIGHT"
