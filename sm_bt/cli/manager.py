@@ -134,7 +134,9 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
         if len(lines) > STARTUP_LINES:
             log.info("... and %d more lines of services", len(lines) - STARTUP_LINES)
         systems = sum(isinstance(p, SystemPart) for p in model.parts.values())
-        nodes = f"and {len(model.nodes)} node(s)" if args.serve == "all" else f"(not their {len(model.nodes)} node(s))"
+        remote = sum(node.remote is not None for node in model.nodes)
+        nodes = (f"over {remote} remote part(s)" if remote else f"and {len(model.nodes)} node(s)"
+                 if args.serve == "all" else f"(not their {len(model.nodes)} node(s))")
         print(f"mode manager {args.node_name} serving {systems} system(s) {nodes} of {model.path}; Ctrl-C to stop",
               flush=True)
         stop.wait()

@@ -11,8 +11,9 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from lifecycle_msgs.srv import GetState
 from ros_processes import ManagerProcess, RosContext, Starter, wait_until
-from system_modes_msgs.srv import GetMode
+from system_modes_msgs.srv import ChangeMode, GetMode
 
 from sm_bt.model import load_model
 from sm_bt.model.states import State
@@ -47,6 +48,8 @@ robot2:
 #: The fleet's liveness window and probe interval (RemoteBackend's defaults), and what the verdict
 #: may take beyond them on a loaded machine.
 WINDOW, PROBE, LATENCY = 0.9, 0.3, 0.3
+#: lifecycle_msgs/msg/State's id.
+INACTIVE = 2
 
 
 @pytest.fixture
@@ -99,3 +102,36 @@ def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
     wait_until(lambda: str(fleet_manager.actual("robot1")) == "active.f_energy_saving_mode", 10.0,
                "robot1 never read again")
     assert str(fleet_manager.actual("fleet")) == "active.NIGHT"
+
+
+def test_sm_bt_manager_of_a_fleet_model_serves_the_fleet_over_the_robots_managers(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
+        tmp_path: Path) -> None:
+    path = tmp_path / "fleet.yaml"
+    path.write_text(FLEET)
+    for name in ("robot1", "robot2"):
+        start_manager("--namespace", f"/{name}").ready()
+        node_processes("pilot", "--namespace", f"/{name}", "--state", "inactive")
+    fleet = start_manager("--node-name", "fleet_manager", model=str(path)).ready()
+    assert "- remote part 'robot1': /robot1/pilot, served by its own manager" in fleet.stderr
+    ros = ros_context
+
+    def state_of(part: str) -> int:
+        try:
+            return int(ros.call(GetState, f"/{part}/get_state", GetState.Request(), 5.0).current_state.id)
+        except TimeoutError:
+            return -1
+
+    def mode_of(part: str) -> str:
+        try:
+            return str(ros.call(GetMode, f"/{part}/get_mode", GetMode.Request(), 5.0).current_mode)
+        except TimeoutError:
+            return ""
+
+    wait_until(lambda: state_of("fleet") == INACTIVE, 20.0, "the fleet never read its robots")
+    assert len(fleet.lines("appeared: inactive")) == 2, fleet.stderr[-2000:]
+    answer = ros.call(ChangeMode, "/fleet/change_mode", ChangeMode.Request(mode_name="NIGHT"), 5.0)
+    assert answer.success
+    wait_until(lambda: mode_of("fleet") == "NIGHT", 20.0, "the fleet never reached NIGHT")
+    assert mode_of("robot1/pilot") == "f_energy_saving_mode"
+    assert state_of("robot2/pilot") == INACTIVE
