@@ -104,7 +104,7 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
     from sm_bt.ros.environment import RECEIVE_ROOM_PROFILE, RosUnavailable, receive_room
 
     try:
-        from sm_bt.ros.remote_parts import MixedModel
+        from sm_bt.model.remote_parts import MixedModel
         from sm_bt.ros.runtime import RosRuntime
 
         # This process is the manager's: room for a large change's burst of answers and events.

@@ -22,8 +22,9 @@ import re
 
 from sm_bt.model.declarations import PartDecl
 from sm_bt.model.diagnostics import Diagnostics
+from sm_bt.model.errors import Error
 from sm_bt.model.rcl_yaml import YScalar, describe
-from sm_bt.model.types import REMOTE_MODE, Location, NodeMode, NodePart, ParamSpec, Remote
+from sm_bt.model.types import REMOTE_MODE, Location, Model, NodeMode, NodePart, ParamSpec, Remote
 
 # rmw_validate_namespace: an absolute namespace of segments as node names have them.
 _NAMESPACE = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)*/?")
@@ -65,3 +66,19 @@ def _text(decl: PartDecl, key: str, default: str, diag: Diagnostics) -> str | No
 def _line(decl: PartDecl, key: str) -> int:
     entry = decl.params.get(key)
     return entry[0].line if entry is not None else decl.line
+
+
+class MixedModel(Error, ValueError):
+    """A model with both remote parts and nodes: a fleet manager's parts are remote ones only."""
+
+
+def check_fleet(model: Model) -> bool:
+    """Whether ``model`` is a fleet's (its nodes are all remote parts); :class:`MixedModel` when only
+    some are."""
+    remote = [part.name for part in model.nodes if part.remote is not None]
+    local = [part.name for part in model.nodes if part.remote is None]
+    if remote and local:
+        raise MixedModel(f"{model.path}: {', '.join(local[:5])}{' ...' if len(local) > 5 else ''} are nodes beside "
+                         f"the remote parts {', '.join(remote[:5])}: a fleet manager drives remote parts only; put "
+                         "the nodes in a robot's model, served by that robot's manager")
+    return bool(remote)

@@ -36,7 +36,7 @@ from system_modes_msgs.srv import ChangeMode, GetMode
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
 from sm_bt.engine.clock import WallClock
 from sm_bt.engine.lifecycle import Transition
-from sm_bt.model.errors import Error
+from sm_bt.model.remote_parts import MixedModel, check_fleet
 from sm_bt.model.states import State
 from sm_bt.model.types import REMOTE_MODE, Model, ParamValue
 from sm_bt.ros.peers import Link, state_of
@@ -46,22 +46,6 @@ log = logging.getLogger("sm_bt.ros.remote_parts")
 #: The managers' events are latched (sm-bt manager's; the reference's are volatile, and a latched
 #: reader still matches them).
 _EVENTS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-
-
-class MixedModel(Error, ValueError):
-    """A model with both remote parts and nodes: a fleet manager's parts are remote ones only."""
-
-
-def check_fleet(model: Model) -> bool:
-    """Whether ``model`` is a fleet's (its nodes are all remote parts); :class:`MixedModel` when only
-    some are."""
-    remote = [part.name for part in model.nodes if part.remote is not None]
-    local = [part.name for part in model.nodes if part.remote is None]
-    if remote and local:
-        raise MixedModel(f"{model.path}: {', '.join(local[:5])}{' ...' if len(local) > 5 else ''} are nodes beside "
-                         f"the remote parts {', '.join(remote[:5])}: a fleet manager drives remote parts only; put "
-                         "the nodes in a robot's model, served by that robot's manager")
-    return bool(remote)
 
 
 @dataclass

@@ -103,10 +103,11 @@ class RosRuntime:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
 
+        from sm_bt.model.remote_parts import check_fleet
         from sm_bt.ros.backend import RosBackend
         from sm_bt.ros.diagnostics import DiagnosticsPublisher
         from sm_bt.ros.manager_node import ModeManagerServer
-        from sm_bt.ros.remote_parts import RemoteBackend, check_fleet
+        from sm_bt.ros.remote_parts import RemoteBackend
 
         fleet = check_fleet(model)  # before anything is made that would have to be closed
         self.model = model

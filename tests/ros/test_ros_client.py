@@ -288,7 +288,7 @@ def test_a_model_with_remote_parts_and_nodes_is_refused_on_ros_with_what_to_do(t
     """A fleet manager drives remote parts only: a model that mixes them with nodes is refused at
     once, before anything is made, naming both."""
     from sm_bt.model import load_model
-    from sm_bt.ros.remote_parts import MixedModel
+    from sm_bt.model.remote_parts import MixedModel
     from sm_bt.ros.runtime import RosRuntime
 
     path = tmp_path / "fleet.yaml"
