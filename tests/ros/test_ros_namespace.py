@@ -45,7 +45,9 @@ def test_two_robots_in_their_namespaces_are_served_apart(
     node_processes("pilot", "--namespace", "/robot2", "--state", "inactive")
     robot1.ready()
     robot2.ready()
-    assert "  - /robot1/pilot/change_mode" in robot1.stderr and "  - /pilot/change_mode" not in robot1.stderr
+    # Its stderr is read by a thread of its own: the start-up lines may follow "serving" by a moment.
+    wait_until(lambda: "  - /robot1/pilot/change_mode" in robot1.stderr, 5.0, "no start-up line")
+    assert "  - /pilot/change_mode" not in robot1.stderr
     ros = ros_context
     events: list[Any] = []
     ros.node.create_subscription(ModeEvent, "/robot1/pilot/mode_event", events.append, LATCHED)
