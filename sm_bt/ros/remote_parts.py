@@ -1,8 +1,9 @@
 """The ROS 2 backend of a fleet: remote parts driven through the system_modes interface of their managers.
 
 Each remote part (``type: remote``, :mod:`sm_bt.model.remote_parts`) is a system that another mode
-manager serves at ``Remote.fqn`` (``/robot1/pilot``): ``sm-bt manager`` in the robot's namespace,
-or the reference's ``mode_manager``. :class:`RemoteBackend` speaks to it as any client does:
+manager serves at ``Remote.fqn`` (``/robot1/pilot``): ``sm-bt manager`` in the robot's namespace.
+(The reference's ``mode_manager`` answers ``unknown`` for a system until one of its nodes moves,
+so such a robot never appears yet.) :class:`RemoteBackend` speaks to it as any client does:
 
 * a change of state is its ``change_state``, of mode its ``change_mode``; an answer ``success``
   means accepted, and the change counts as done once its ``transition_event`` / ``mode_event``
@@ -43,8 +44,8 @@ from sm_bt.ros.peers import Link, state_of
 
 log = logging.getLogger("sm_bt.ros.remote_parts")
 
-#: The managers' events are latched (sm-bt manager's; the reference's are volatile, and a latched
-#: reader still matches them).
+#: Volatile: it matches sm-bt manager's latched writers and the reference's volatile ones alike;
+#: what came before is read with get_state/get_mode instead.
 _EVENTS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
