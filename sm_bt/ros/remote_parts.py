@@ -44,6 +44,9 @@ from sm_bt.ros.peers import Link, state_of
 
 log = logging.getLogger("sm_bt.ros.remote_parts")
 
+#: Timers fire a little early or late: a verdict is checked this long after it falls due.
+_SLACK = 0.005
+
 #: Volatile: it matches sm-bt manager's latched writers and the reference's volatile ones alike;
 #: what came before is read with get_state/get_mode instead.
 _EVENTS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
@@ -151,20 +154,30 @@ class RemoteBackend:
         with self._lock:
             if self._listener is None:
                 return
-            silent = robot.present and self._clock.now() - robot.last_heard > self.liveness_timeout
-            if silent:
-                robot.present = False
             asking = not robot.probing
-            robot.probing = robot.probing or asking
-        if silent:
-            self._report(lambda listener: listener.node_vanished(
-                robot.part, f"no answer from the manager of {robot.part} ({robot.fqn}) for "
-                            f"{self.liveness_timeout:g} s (it exited, or the network is cut)"))
+            robot.probing = True
+            # The verdict falls due one window after the last word, not at the next probe's tick.
+            due = max(0.0, robot.last_heard + self.liveness_timeout - self._clock.now())
+        self._judge(robot)
         if asking:
             self._call(robot, robot.get_state, GetState.Request(), "get_state (liveness)",
                        lambda response: self._state_answer(robot, state_of(response.current_state.id)),
                        lambda why: self._probe_failed(robot), timeout=self.liveness_timeout)
+        if due < self.probe_interval:
+            self._clock.call_later(due + _SLACK, lambda: self._judge(robot))
         self._clock.call_later(self.probe_interval, lambda: self._probe(robot))
+
+    def _judge(self, robot: _Robot) -> None:
+        """Out of reach once nothing was heard from its manager for the window."""
+        with self._lock:
+            silent = (self._listener is not None and robot.present
+                      and self._clock.now() - robot.last_heard >= self.liveness_timeout)
+            if silent:
+                robot.present = False
+        if silent:
+            self._report(lambda listener: listener.node_vanished(
+                robot.part, f"no answer from the manager of {robot.part} ({robot.fqn}) for "
+                            f"{self.liveness_timeout:g} s (it exited, or the network is cut)"))
 
     def _probe_failed(self, robot: _Robot) -> None:
         with self._lock:
