@@ -6,6 +6,9 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis_profiles import examples
 from test_sim_remote import FLEET
 
 from sm_bt.engine.events import EventKind
@@ -93,3 +96,43 @@ def test_models_and_robots_that_do_not_fit_are_told() -> None:
         simulated_fleet(renamed, ROBOTS)
     with pytest.raises(NotAFleet, match="amcl, controller_server, pointcloud_to_laser, laser_resender are nodes"):
         simulated_fleet("pilot", {})
+
+
+_ACTIONS = st.lists(st.one_of(
+    st.tuples(st.just("fleet"), st.sampled_from(("__DEFAULT__", "NIGHT", "EVACUATE"))),
+    st.tuples(st.just("cut"), st.sampled_from(tuple(ROBOTS))),
+    st.tuples(st.just("heal"), st.sampled_from(tuple(ROBOTS))),
+    st.tuples(st.just("local"), st.sampled_from(tuple(ROBOTS)),
+              st.sampled_from(("__DEFAULT__", "f_energy_saving_mode", "f_degraded_mode"))),
+    st.tuples(st.just("wait"), st.sampled_from((0.0, 0.02, 0.1, 0.5, 2.5)))), min_size=1, max_size=12)
+
+
+@examples(100, stress=10_000)
+@given(_ACTIONS)
+def test_partitions_and_requests_in_any_order_leave_the_fleet_consistent_with_its_robots(
+        actions: list[tuple[Any, ...]]) -> None:
+    """Whatever fleet requests, cuts, heals, robots' own changes and waits come in whatever order:
+    a fleet request refused as a whole sends nothing to any robot, and once every robot is healed
+    and the fleet settles, the fleet's view of each robot is what the robot's own manager infers."""
+    fleet, robots = fleet_of_pilots(grace_period=0.5)
+    backend = fleet.backend
+    assert isinstance(backend, RemoteManagers)
+    for action in actions:
+        if action[0] == "fleet":
+            before = {name: len(requests(robot)) for name, robot in robots.items()}
+            request = fleet.manager.change_mode("fleet", action[1])
+            if request.refused:
+                assert {name: len(requests(robot)) for name, robot in robots.items()} == before
+        elif action[0] == "cut":
+            backend.cut(action[1])
+        elif action[0] == "heal":
+            backend.heal(action[1])
+        elif action[0] == "local":
+            robots[action[1]].manager.change_mode("pilot", action[2])
+        else:
+            fleet.run(action[1])
+    for name in ROBOTS:
+        backend.heal(name)
+    fleet.run(30.0)  # requests end (timeouts included), recovery settles
+    for name, robot in robots.items():
+        assert fleet.manager.actual(name).state_mode == robot.manager.actual("pilot").state_mode, name
