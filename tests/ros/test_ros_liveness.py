@@ -229,6 +229,7 @@ def test_nodes_whose_transitions_take_seconds_are_busy_not_gone(
         ros.close()
 
 
+@pytest.mark.long
 def test_processes_of_this_host_silent_together_wait_for_the_common_cause_one_alone_is_judged(
         node_processes: Starter, runtime: RosRuntime) -> None:
     """One process of the manager's host frozen alone is judged within the window. Two frozen together
@@ -253,9 +254,12 @@ def test_processes_of_this_host_silent_together_wait_for_the_common_cause_one_al
     vanished = _vanished(manager)
     with Stopped(first), Stopped(second):
         time.sleep(2 * WINDOW)  # past the window, within the cap
-    time.sleep(2 * WINDOW)  # and a window after it: both answer again
-    assert vanished == [] and all(manager.observation(n).reachable for n in NODES), vanished
+        # Judged while both are silent: nothing yet. (After the thaw, what the freeze lost waits for
+        # its writers' heartbeats, up to 3 s: that is DDS's repair, not this guard's business.)
+        assert vanished == [] and all(manager.observation(n).reachable for n in NODES), vanished
+    _reachable(runtime)
     time.sleep(3.0)
+    vanished.clear()
     with Stopped(first), Stopped(second) as stopped:
         wait_until(lambda: not any(manager.observation(n).reachable for n in NODES), COMMON_CAP + 2.0,
                    "still reachable")
