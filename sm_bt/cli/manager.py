@@ -14,6 +14,7 @@ sm_bt configures logging: as a library it stays silent unless the application do
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import threading
@@ -62,6 +63,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--serve", choices=("all", "systems"), default="all",
                         help="whose system_modes interface to serve: every part's, as the reference (default), "
                              "or the systems' only (a plant of hundreds of nodes: each node's is 15 DDS endpoints)")
+    parser.add_argument("--receive-room", action="store_true",
+                        help="a Fast DDS shared-memory port of 8,192 samples for this process, for a plant of "
+                             "hundreds of nodes (docs/ros-interface.md, \"Receive room\": it also sizes the ports "
+                             "shared with other processes)")
     parser.add_argument("--no-rules", action="store_true", help="do not apply the model's rules")
     parser.add_argument("--no-recovery", action="store_true", help="do not restore nodes that left their target")
     parser.add_argument("--lenient", action="store_true",
@@ -107,8 +112,8 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
         from sm_bt.model.remote_parts import MixedModel
         from sm_bt.ros.runtime import RosRuntime
 
-        # This process is the manager's: room for a large change's burst of answers and events.
-        with receive_room() as roomy:
+        # Asked for: room for a large change's burst of answers and events (docs/ros-interface.md).
+        with receive_room() if args.receive_room else contextlib.nullcontext(False) as roomy:
             runtime = RosRuntime(model, node_name=args.node_name, requester=args.requester,
                                  serve_nodes=args.serve == "all", namespace=args.namespace, manager_options={
                 "grace_period": args.grace_period, "request_timeout": args.request_timeout,
