@@ -19,6 +19,7 @@ from ros_processes import NodeProcess, RosContext, Starter, Starved, wait_until
 
 from sm_bt.model.states import State
 from sm_bt.ros.backend import RosBackend
+from sm_bt.ros.liveness import MAX_WINDOW
 from sm_bt.ros.runtime import RosRuntime
 
 pytestmark = pytest.mark.ros
@@ -127,7 +128,8 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
     with Stopped(nodes) as stopped, Starved() as starved:
         request = manager.change_mode("pilot", "f_normal_mode")
         assert not request.refused, "the manager did not know yet: accepted"
-        took = wait_until(lambda: request.done, 5.0, "the request did not end")
+        # Up to the widest window: on a loaded machine the backend may have learned a wide one.
+        took = wait_until(lambda: request.done, MAX_WINDOW + 2.0, "the request did not end")
         assert not request.succeeded
         verdict = REASON.search(request.reason)
         assert verdict, request.reason
@@ -153,7 +155,7 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
             return [(arrived, status) for arrived, status in statuses(received, "pilot")
                     if status.level == ERROR and _values(status).get("last_request_outcome") == "failed"]
 
-        wait_until(lambda: failed(), 2.0, "the failure is not on /diagnostics")
+        wait_until(lambda: failed(), window + 2.0, "the failure is not on /diagnostics")
         arrived, status = failed()[0]
         assert arrived - stopped.at <= window + LATENCY + 0.1 + starved.worst
         assert REASON.search(_values(status)["last_request_reason"]), _values(status)
