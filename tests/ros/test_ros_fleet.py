@@ -61,7 +61,6 @@ def fleet(tmp_path: Path) -> Iterator[RosRuntime]:
     runtime.close()
 
 
-@pytest.mark.long
 def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
         fleet: RosRuntime) -> None:
@@ -106,7 +105,6 @@ def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
     assert str(fleet_manager.actual("fleet")) == "active.NIGHT"
 
 
-@pytest.mark.long
 def test_sm_bt_manager_of_a_fleet_model_serves_the_fleet_over_the_robots_managers(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
         tmp_path: Path) -> None:

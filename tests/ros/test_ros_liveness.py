@@ -231,7 +231,6 @@ def test_nodes_whose_transitions_take_seconds_are_busy_not_gone(
         ros.close()
 
 
-@pytest.mark.long
 def test_processes_of_this_host_silent_together_wait_for_the_common_cause_one_alone_is_judged(
         node_processes: Starter, runtime: RosRuntime) -> None:
     """One process of the manager's host frozen alone is judged within the window. Two frozen together
