@@ -69,7 +69,8 @@ def _line(decl: PartDecl, key: str) -> int:
 
 
 class MixedModel(Error, ValueError):
-    """A model with both remote parts and nodes: a fleet manager's parts are remote ones only."""
+    """A model with both remote parts and nodes (a fleet manager's parts are remote ones only), or
+    given to the ROS backend of the other kind."""
 
 
 def check_fleet(model: Model) -> bool:

@@ -56,7 +56,7 @@ from rclpy.qos import QoSProfile, qos_profile_parameter_events
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
 from sm_bt.engine.clock import WallClock
 from sm_bt.engine.lifecycle import EDGE_OF, Transition
-from sm_bt.model.errors import Error
+from sm_bt.model.remote_parts import MixedModel, check_fleet
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, ParamValue
 from sm_bt.ros import removable
@@ -85,21 +85,6 @@ from sm_bt.ros.requests import (
 log = logging.getLogger("sm_bt.ros.backend")
 
 
-class RemoteUnsupported(Error, ValueError):
-    """The model has remote parts (``type: remote``), which this backend does not drive: they are
-    other managers' systems (:class:`~sm_bt.ros.remote_parts.RemoteBackend`)."""
-
-
-def refuse_remote(model: Model) -> None:
-    """Raise :class:`RemoteUnsupported`, naming them, if ``model`` has remote parts: they would
-    only ever be unknown here (nothing on the ROS graph has their name)."""
-    remote = [node.name for node in model.nodes if node.remote is not None]
-    if remote:
-        raise RemoteUnsupported(f"{model.path}: {', '.join(remote[:5])}{' ...' if len(remote) > 5 else ''}: remote "
-                                "parts are driven by sm_bt.ros.remote_parts.RemoteBackend (RosRuntime picks it for "
-                                "a fleet's model), not by the nodes' backend")
-
-
 class RosBackend:
     """The nodes of ``model``, reached through ``node`` (an rclpy node spun by an executor).
 
@@ -117,7 +102,9 @@ class RosBackend:
                  plain_after: float = 1.0, poll_interval: float = 0.1, idle_poll_interval: float = 1.0,
                  graph_interval: float = 1.0, escalate_interval: float = 0.05, watch_node: Node | None = None,
                  namespace: str = "/") -> None:
-        refuse_remote(model)
+        if check_fleet(model):  # remote parts are other managers' systems, nothing on the graph has their name
+            raise MixedModel(f"{model.path}: its nodes are remote parts: sm_bt.ros.remote_parts.RemoteBackend "
+                             "drives them (RosRuntime picks it for a fleet's model)")
         #: Where the model's nodes are: ``/robot1`` makes part ``amcl`` the node ``/robot1/amcl``.
         self.namespace = namespace
         self._node = node

@@ -40,12 +40,9 @@ from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.remote_parts import MixedModel, check_fleet
 from sm_bt.model.states import State
 from sm_bt.model.types import REMOTE_MODE, Model, ParamValue
-from sm_bt.ros.peers import Link, state_of
+from sm_bt.ros.peers import SLACK, Link, state_of
 
 log = logging.getLogger("sm_bt.ros.remote_parts")
-
-#: Timers fire a little early or late: a verdict is checked this long after it falls due.
-_SLACK = 0.005
 
 #: Volatile: it matches sm-bt manager's latched writers and the reference's volatile ones alike;
 #: what came before is read with get_state/get_mode instead.
@@ -164,7 +161,7 @@ class RemoteBackend:
                        lambda response: self._state_answer(robot, state_of(response.current_state.id)),
                        lambda why: self._probe_failed(robot), timeout=self.liveness_timeout)
         if due < self.probe_interval:
-            self._clock.call_later(due + _SLACK, lambda: self._judge(robot))
+            self._clock.call_later(due + SLACK, lambda: self._judge(robot))
         self._clock.call_later(self.probe_interval, lambda: self._probe(robot))
 
     def _judge(self, robot: _Robot) -> None:

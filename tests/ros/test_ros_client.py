@@ -305,3 +305,13 @@ def test_a_model_with_remote_parts_and_nodes_is_refused_on_ros_with_what_to_do(t
                           timeout=60)
     assert (done.returncode, done.stdout) == (1, "")
     assert f"sm-bt: error: {path}: {expected}" in done.stderr
+
+
+def test_the_nodes_backend_refuses_a_fleets_model_and_names_the_one_that_drives_it(ros_context: RosContext) -> None:
+    from sm_bt.model import load_model
+    from sm_bt.model.remote_parts import MixedModel
+    from sm_bt.ros.backend import RosBackend
+
+    fleet = Path(__file__).resolve().parents[2] / "docs" / "examples" / "fleet.yaml"
+    with pytest.raises(MixedModel, match=r"its nodes are remote parts: sm_bt.ros.remote_parts.RemoteBackend drives"):
+        RosBackend(ros_context.node, load_model(fleet))

@@ -21,30 +21,9 @@ from sm_bt.ros.runtime import RosRuntime
 
 pytestmark = pytest.mark.ros
 
-FLEET = """\
-fleet:
-  ros__parameters:
-    type: system
-    modes:
-      __DEFAULT__:
-        robot1: active
-        robot2: active
-      NIGHT:
-        robot1: active.f_energy_saving_mode
-        robot2: inactive
-robot1:
-  ros__parameters:
-    type: remote
-    manager: /robot1
-    system: pilot
-    modes: [__DEFAULT__, f_energy_saving_mode, f_degraded_mode]
-robot2:
-  ros__parameters:
-    type: remote
-    manager: /robot2
-    system: pilot
-    modes: [__DEFAULT__, f_energy_saving_mode, f_degraded_mode]
-"""
+#: Two robots (/robot1/pilot, /robot2/pilot) under a fleet of __DEFAULT__ and NIGHT: the model
+#: of docs/model-format.md, "Remote parts".
+FLEET = Path(__file__).resolve().parents[2] / "docs" / "examples" / "fleet.yaml"
 #: The fleet's liveness window (RemoteBackend's default), and what the verdict
 #: may take beyond them on a loaded machine.
 WINDOW, LATENCY = 0.9, 0.3
@@ -53,10 +32,8 @@ INACTIVE = 2
 
 
 @pytest.fixture
-def fleet(tmp_path: Path) -> Iterator[RosRuntime]:
-    path = tmp_path / "fleet.yaml"
-    path.write_text(FLEET)
-    runtime = RosRuntime(load_model(path), node_name="fleet_manager", manager_options={"request_timeout": 20.0})
+def fleet() -> Iterator[RosRuntime]:
+    runtime = RosRuntime(load_model(FLEET), node_name="fleet_manager", manager_options={"request_timeout": 20.0})
     yield runtime
     runtime.close()
 
@@ -106,14 +83,11 @@ def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
 
 
 def test_sm_bt_manager_of_a_fleet_model_serves_the_fleet_over_the_robots_managers(
-        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
-        tmp_path: Path) -> None:
-    path = tmp_path / "fleet.yaml"
-    path.write_text(FLEET)
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext) -> None:
     for name in ("robot1", "robot2"):
         start_manager("--namespace", f"/{name}").ready()
         node_processes("pilot", "--namespace", f"/{name}", "--state", "inactive")
-    fleet = start_manager("--node-name", "fleet_manager", model=str(path)).ready()
+    fleet = start_manager("--node-name", "fleet_manager", model=str(FLEET)).ready()
     # Its stderr is read by a thread of its own: the start-up lines may follow "serving" by a moment.
     wait_until(lambda: "- remote part 'robot1': /robot1/pilot, served by its own manager" in fleet.stderr, 5.0,
                "no start-up line for the remote part")
