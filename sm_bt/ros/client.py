@@ -66,6 +66,11 @@ class NotConfirmed(Error, RuntimeError):
     says why and where the part is."""
 
 
+def _namespace(part: str) -> str:
+    """``robot1`` of ``robot1/pilot``; ``""`` of a part at the root."""
+    return part.strip("/").rpartition("/")[0]
+
+
 def _closest(word: str, served: list[str], what: str) -> str:
     """The closest served name, or else the ones served (``what``: how to call them)."""
     return did_you_mean(word, served) or (f" ({what}: {', '.join(served)})" if served else "")
@@ -134,7 +139,9 @@ class ModeClient:
             time.sleep(0.02)
             elapsed = time.monotonic() - start
             if elapsed >= DISCOVERY_GRACE or elapsed >= self.timeout:
-                served = self.served_parts()
+                # Only the parts of its namespace tell: robots of a fleet share a domain, and one
+                # robot's manager seen first says nothing of another's, still being discovered.
+                served = [name for name in self.served_parts() if _namespace(name) == _namespace(part)]
                 if served and part not in served:
                     raise UnknownName(f"no manager serves the part {part!r}{_closest(part, served, 'parts served')}")
             if elapsed >= self.timeout:

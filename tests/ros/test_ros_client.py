@@ -315,3 +315,25 @@ def test_the_nodes_backend_refuses_a_fleets_model_and_names_the_one_that_drives_
     fleet = Path(__file__).resolve().parents[2] / "docs" / "examples" / "fleet.yaml"
     with pytest.raises(MixedModel, match=r"its nodes are remote parts: sm_bt.ros.remote_parts.RemoteBackend drives"):
         RosBackend(ros_context.node, load_model(fleet))
+
+
+def test_a_part_is_judged_unserved_by_the_parts_of_its_own_namespace_only(
+        ros_context: RosContext, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Robots of a fleet share a domain: another robot's manager, discovered first, does not make
+    this robot's part unknown (it waits for the timeout); a sibling of its own namespace does."""
+    from sm_bt.ros.client import ModeClient, UnknownName
+
+    class NeverReady:
+        def service_is_ready(self) -> bool:
+            return False
+
+    client = ModeClient(timeout=2.5, context=ros_context.context)
+    try:
+        monkeypatch.setattr(client, "served_parts", lambda: ["robot2/pilot", "pilot"])
+        assert client._found(NeverReady(), "robot1/pilot") is False  # still discovering: not a typo
+        monkeypatch.setattr(client, "served_parts", lambda: ["robot1/pilott", "robot2/pilot"])
+        with pytest.raises(UnknownName, match=r"no manager serves the part 'robot1/pilot' \(did you mean "
+                                              r"'robot1/pilott'\?\)"):
+            client._found(NeverReady(), "robot1/pilot")
+    finally:
+        client.close()
