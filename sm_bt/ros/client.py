@@ -39,6 +39,9 @@ TRANSITION_GOALS = {step.transition.label: step.goal.label for step in REQUESTAB
 #: Discovery time after which a manager that serves other parts, but not the one asked for, means
 #: a wrong name rather than a slow network.
 DISCOVERY_GRACE = 2.0
+#: ... once the parts served have stopped growing for this long: on a loaded machine a manager's
+#: dozens of services are discovered over seconds, and a part not seen yet is no typo.
+DISCOVERY_SETTLED = 1.0
 #: How often a wait asks get_mode/get_state when no event wakes it (events wake it at once).
 POLL = 0.5
 #: The services a node serves itself (a system's are its manager's).
@@ -131,18 +134,25 @@ class ModeClient:
 
     def _found(self, client: Any, part: str) -> bool:
         """Wait for ``client``'s service; :class:`UnknownName` as soon as discovery shows a manager
-        serving other parts but not this one (a typo need not wait for the whole timeout)."""
+        serving other parts of its namespace but not this one, and no more appearing (a typo need
+        not wait for the whole timeout)."""
         start = time.monotonic()
+        seen: set[str] = set()
+        grew = start
         # Polled every 20 ms: rclpy's wait_for_service sleeps 0.25 s between looks, which every
         # service of a command paid at least once (the graph usually shows it within a few ms).
         while not client.service_is_ready():
             time.sleep(0.02)
-            elapsed = time.monotonic() - start
+            now = time.monotonic()
+            elapsed = now - start
             if elapsed >= DISCOVERY_GRACE or elapsed >= self.timeout:
                 # Only the parts of its namespace tell: robots of a fleet share a domain, and one
                 # robot's manager seen first says nothing of another's, still being discovered.
                 served = [name for name in self.served_parts() if _namespace(name) == _namespace(part)]
-                if served and part not in served:
+                if not seen.issuperset(served):
+                    seen.update(served)
+                    grew = now
+                if served and part not in served and now - grew >= DISCOVERY_SETTLED:
                     raise UnknownName(f"no manager serves the part {part!r}{_closest(part, served, 'parts served')}")
             if elapsed >= self.timeout:
                 return False
