@@ -32,6 +32,8 @@ DONT_CARE = "__DONTCARE__"
 #: The one parameter of a remote part: to the engine a remote part is a node whose parameter is the
 #: mode its manager reports, and whose modes each set it to their name (sm_bt.model.remote_parts).
 REMOTE_MODE = "__mode__"
+#: What a remote part's ``unknown_means`` may say (:class:`Remote`); the first is the default.
+REMOTE_UNKNOWN_MEANS = ("unreachable", "unconfigured")
 
 
 class PartKind(str, enum.Enum):
@@ -207,10 +209,14 @@ class Rule:
 @dataclass(frozen=True)
 class Remote:
     """Where a remote part is served: the namespace of its manager's services (``""``: the root)
-    and the part's name in that manager's model."""
+    and the part's name in that manager's model. ``unknown_means``: what its manager's ``unknown``
+    means before that manager has ever known the part: ``unreachable`` (its nodes are not
+    there yet), or ``unconfigured`` for a manager that learns states only from its nodes' events
+    (the reference's ``mode_manager``), whose nodes wait unconfigured."""
 
     manager: str
     system: str
+    unknown_means: str = REMOTE_UNKNOWN_MEANS[0]
 
     @property
     def fqn(self) -> str:

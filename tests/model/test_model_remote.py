@@ -55,6 +55,12 @@ def test_a_remote_part_is_a_node_whose_one_parameter_is_its_mode() -> None:
     assert model.parts["fleet"].modes["NIGHT"].entries["robot1"].target.mode == "f_energy_saving_mode"  # type: ignore[union-attr]
 
 
+def test_what_unknown_means_at_start_is_unreachable_unless_the_part_says_unconfigured() -> None:
+    model = load_model_text(FLEET.format(robot2=ROBOT2 + "    unknown_means: unconfigured\n"))
+    assert model.parts["robot1"].remote.unknown_means == "unreachable"  # type: ignore[union-attr]
+    assert model.parts["robot2"].remote == Remote("", "robot2", "unconfigured")  # type: ignore[union-attr]
+
+
 def test_modes_may_be_listed_on_lines_and_a_default_named() -> None:
     model = load_model_text(FLEET.format(robot2="    defaultmode: DAY\n    modes:\n      DAY\n      __DEFAULT__\n"
                                                 "      f_energy_saving_mode\n"))
@@ -77,6 +83,11 @@ def test_modes_may_be_listed_on_lines_and_a_default_named() -> None:
      "22: system '2pilot' of remote part 'robot2' is not a part name: use letters, digits and underscores, "
      "as in that manager's model"),
     (ROBOT2 + "    system: [a, b]\n", "22: 'system' of remote part 'robot2' must be a name, not a list"),
+    (ROBOT2 + "    unknown_means: inactive\n",
+     "22: unknown_means 'inactive' of remote part 'robot2' is not one of unreachable, unconfigured: "
+     "'unconfigured' for a manager that learns states only from its nodes' events (the reference's "
+     "mode_manager), else leave it out"),
+    (ROBOT2 + "    unknown_means: 3\n", "22: 'unknown_means' of remote part 'robot2' must be a name, not '3'"),
     (ROBOT2 + "    parts: [a]\n",
      "22: remote part 'robot2' cannot have 'parts': its manager holds its parts, parameters and rules; remove it"),
     (ROBOT2 + "    match: {x: {tolerance: 1}}\n",
