@@ -1,18 +1,27 @@
 """The ROS 2 backend of a fleet: remote parts driven through the system_modes interface of their managers.
 
 Each remote part (``type: remote``, :mod:`sm_bt.model.remote_parts`) is a system that another mode
-manager serves at ``Remote.fqn`` (``/robot1/pilot``): ``sm-bt manager`` in the robot's namespace.
-(The reference's ``mode_manager`` answers ``unknown`` for a system until one of its nodes moves,
-so such a robot never appears yet.) :class:`RemoteBackend` speaks to it as any client does:
+manager serves at ``Remote.fqn`` (``/robot1/pilot``): ``sm-bt manager`` in the robot's namespace, or
+the reference's ``mode_manager``. :class:`RemoteBackend` speaks to it as any client does:
 
-* a change of state is its ``change_state``, of mode its ``change_mode``; an answer ``success``
-  means accepted, and the change counts as done once its ``transition_event`` / ``mode_event``
-  says so (the reference sends those from a 1 s timer);
 * its state and mode are read with ``get_state``/``get_mode`` when it appears and after it was out
-  of reach (the heal), then followed on its events;
+  of reach (the heal), then followed on its ``transition_event``/``mode_event`` (the reference
+  sends those from a 1 s timer), and on the liveness probes' answers (below): a state event that
+  never came (the reference sometimes sends none) is corrected by the next probe;
+* a change of state is its ``change_state`` (transition id and label: the reference reads the
+  id), except activation, which is its ``change_mode`` to the mode the fleet wants it in: both
+  managers activate a system into the mode asked for, while the reference's ``activate`` means
+  ``__DEFAULT__``. A change of mode of an active robot is its ``change_mode``; of one that is not
+  active, it is kept for its activation (to the engine, the mode of a robot that is not active is
+  the one it will be activated in). An answer ``success`` means accepted, and the change counts
+  as done once the robot reports it;
 * liveness: ``get_state`` every ``probe_interval`` s; no answer for ``liveness_timeout`` s makes it
   out of reach ("no answer from the manager of robot1 ..."), and the fleet's rules react. While
-  out of reach it is asked again every probe; the first answer is its reappearance.
+  out of reach it is asked again every probe; the first answer is its reappearance. A manager
+  that answers ``unknown`` has lost its part (its nodes are out of its reach), except before it
+  has ever known it, when the part's ``unknown_means`` says what that means: the reference learns
+  states only from its nodes' events, so until a node moves it knows nothing of nodes that wait
+  unconfigured (``unknown_means: unconfigured``).
 
 Every call has a timeout. Calls and reports run on the backend's node and clock; the listener is
 never called with this backend's lock held.
@@ -39,7 +48,7 @@ from sm_bt.engine.clock import WallClock
 from sm_bt.engine.lifecycle import Transition
 from sm_bt.model.remote_parts import MixedModel, check_fleet
 from sm_bt.model.states import State
-from sm_bt.model.types import REMOTE_MODE, Model, ParamValue
+from sm_bt.model.types import DEFAULT_MODE, REMOTE_MODE, Model, ParamValue
 from sm_bt.ros.peers import SLACK, Link, state_of
 
 log = logging.getLogger("sm_bt.ros.remote_parts")
@@ -57,12 +66,18 @@ class _Robot:
     get_state: Any
     change_mode: Any
     get_mode: Any
+    unknown_means: str
     subscriptions: list[Any] = field(default_factory=list)
     present: bool = False
     last_heard: float = float("-inf")
     probing: bool = False
+    #: As reported to the engine; ``mode`` of a robot that is not active: the one to activate it in.
     state: State = State.UNKNOWN
     mode: str = ""
+    known: bool = False  # its manager has known its state (what it says of it before: unknown_means)
+    assumed: bool = False  # present on unknown_means while its manager still answers unknown
+    events: int = 0  # events received: an answer to a call sent before the last one is older news
+    asked: str | None = None  # a mode its manager accepted and has not reported yet: read at each probe
 
 
 class RemoteBackend:
@@ -89,7 +104,7 @@ class RemoteBackend:
             self._robots[part.name] = _Robot(
                 part.name, fqn, node.create_client(ChangeState, f"{fqn}/change_state"),
                 node.create_client(GetState, f"{fqn}/get_state"), node.create_client(ChangeMode, f"{fqn}/change_mode"),
-                node.create_client(GetMode, f"{fqn}/get_mode"))
+                node.create_client(GetMode, f"{fqn}/get_mode"), part.remote.unknown_means)
 
     @property
     def clock(self) -> WallClock:
@@ -126,6 +141,13 @@ class RemoteBackend:
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
         robot = self._robots[node]
+        if transition is Transition.ACTIVATE:
+            mode = robot.mode or DEFAULT_MODE
+            self._call(robot, robot.change_mode, ChangeMode.Request(mode_name=mode), f"change_mode {mode} (activate)",
+                       lambda response: self._accepted(robot, response.success, mode, done,
+                                                       f"the manager of {node} refused to activate it in mode {mode}"),
+                       lambda why: done(CallResult(False, why)))
+            return
         message = TransitionMessage(id=int(transition.value), label=transition.label)
         refused = CallResult(False, f"the manager of {node} refused {transition.label}", refused=True)
         label = f"change_state {transition.label}"
@@ -140,10 +162,31 @@ class RemoteBackend:
             self._clock.call_later(0.0, lambda: done(CallResult(False, f"{node} is a remote part: only its mode "
                                                                          "can be asked")))
             return
-        refused = CallResult(False, f"the manager of {node} refused mode {mode}")
+        with self._lock:
+            kept = robot.state is not State.ACTIVE
+            if kept:
+                robot.mode = mode
+        if kept:  # for its activation
+            self._clock.call_later(0.0, lambda: self._kept(robot, mode, done))
+            return
         self._call(robot, robot.change_mode, ChangeMode.Request(mode_name=mode), f"change_mode {mode}",
-                   lambda response: done(CallResult(True) if response.success else refused),
+                   lambda response: self._accepted(robot, response.success, mode, done,
+                                                   f"the manager of {node} refused mode {mode}"),
                    lambda why: done(CallResult(False, why)))
+
+    def _kept(self, robot: _Robot, mode: str, done: Done) -> None:
+        self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
+        done(CallResult(True))
+
+    def _accepted(self, robot: _Robot, success: bool, mode: str, done: Done, refusal: str) -> None:
+        """A ``change_mode`` answered. Accepted: its mode is read at once too, since a manager that
+        is there already answers ``success`` and sends no event (the reference: "redundant")."""
+        if success:
+            with self._lock:
+                robot.asked = mode
+        done(CallResult(True) if success else CallResult(False, refusal))
+        if success:
+            self._read_mode(robot, mode)
 
     # -- liveness and reading ------------------------------------------------------------------------------
 
@@ -153,13 +196,17 @@ class RemoteBackend:
                 return
             asking = not robot.probing
             robot.probing = True
+            events = robot.events
+            reading = robot.asked if robot.present and robot.state is State.ACTIVE else None
             # The verdict falls due one window after the last word, not at the next probe's tick.
             due = max(0.0, robot.last_heard + self.liveness_timeout - self._clock.now())
         self._judge(robot)
         if asking:
             self._call(robot, robot.get_state, GetState.Request(), "get_state (liveness)",
-                       lambda response: self._state_answer(robot, state_of(response.current_state.id)),
+                       lambda response: self._state_answer(robot, state_of(response.current_state.id), events),
                        lambda why: self._probe_failed(robot), timeout=self.liveness_timeout)
+        if reading is not None:  # a manager that sends no event (the reference, at times) is read
+            self._read_mode(robot, reading)
         if due < self.probe_interval:
             self._clock.call_later(due + SLACK, lambda: self._judge(robot))
         self._clock.call_later(self.probe_interval, lambda: self._probe(robot))
@@ -180,16 +227,26 @@ class RemoteBackend:
         with self._lock:
             robot.probing = False
 
-    def _state_answer(self, robot: _Robot, state: State) -> None:
+    def _state_answer(self, robot: _Robot, state: State, events: int) -> None:
         with self._lock:
             robot.probing = False
             robot.last_heard = self._clock.now()
-            appearing = not robot.present and state is not State.UNKNOWN
-        if state is State.UNKNOWN:
+            if state is State.UNKNOWN:
+                action = "keep" if robot.assumed else "assume" if (
+                    not robot.known and not robot.present and robot.unknown_means == "unconfigured") else "lost"
+            elif not robot.present:
+                action = "read"
+            else:  # no event since it was asked: the answer is the newer news
+                action = "correct" if events == robot.events and state is not robot.state else "keep"
+        if action == "lost":
             self._unknown(robot)
-        elif appearing:  # at start, or after it was out of reach: read its mode too, then report it
+        elif action == "assume":
+            self._appear(robot, State.UNCONFIGURED, "", assumed=True)
+        elif action == "read":  # at start, or after it was out of reach: read its mode too, then report it
             self._call(robot, robot.get_mode, GetMode.Request(), "get_mode",
                        lambda response: self._appear(robot, state, str(response.current_mode)), lambda why: None)
+        elif action == "correct":
+            self._state(robot, state)
 
     def _unknown(self, robot: _Robot) -> None:
         """Its manager answers, but does not know where its part is (its own nodes out of reach): out
@@ -197,39 +254,82 @@ class RemoteBackend:
         repeat a mode it had before)."""
         with self._lock:
             was = robot.present
-            robot.present = False
+            robot.present = robot.assumed = False
         if was:
             self._report(lambda listener: listener.node_vanished(
                 robot.part, f"the manager of {robot.part} does not know where {robot.fqn} is"))
 
-    def _appear(self, robot: _Robot, state: State, mode: str) -> None:
-        if mode == "unknown":  # not known yet after all: the next probe reads it again
+    def _appear(self, robot: _Robot, state: State, mode: str, *, assumed: bool = False) -> None:
+        if mode == "unknown" and not assumed:  # not known yet after all: the next probe reads it again
             return
         with self._lock:
             if robot.present or self._listener is None:
                 return
             robot.present, robot.state, robot.mode = True, state, mode
+            robot.assumed, robot.known = assumed, robot.known or not assumed
             robot.last_heard = self._clock.now()
+        if assumed:
+            log.info("%s: its manager knows no state of %s yet: taken for unconfigured (unknown_means)",
+                     robot.part, robot.fqn)
         self._report(lambda listener: listener.node_appeared(robot.part, NodeReport(state, {REMOTE_MODE: mode})))
+
+    def _state(self, robot: _Robot, state: State) -> None:
+        """Its manager says it is in ``state``: reported if news; once active, its mode is read."""
+        with self._lock:
+            changed = robot.present and state is not robot.state
+            if changed:
+                robot.state = state
+                robot.assumed, robot.known = False, True
+        if changed:
+            self._report(lambda listener: listener.node_state(robot.part, state))
+            if state is State.ACTIVE:
+                self._read_mode(robot)
+
+    def _read_mode(self, robot: _Robot, only: str | None = None) -> None:
+        """Its mode, asked of its manager (at its activation; after an accepted change, ``only`` the
+        mode asked for, not a switch's intermediate inference): reported if it is news and no mode
+        event came meanwhile (which is newer)."""
+        with self._lock:
+            events = robot.events
+
+        def answered(response: Any) -> None:
+            mode = str(response.current_mode)
+            with self._lock:
+                news = (robot.present and robot.state is State.ACTIVE and events == robot.events
+                        and mode not in ("", "unknown") and mode != robot.mode and only in (None, mode))
+                if news:
+                    robot.mode = mode
+                if mode == robot.asked and robot.state is State.ACTIVE:
+                    robot.asked = None
+            if news:
+                self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
+
+        self._call(robot, robot.get_mode, GetMode.Request(), "get_mode", answered, lambda why: None)
 
     def _transition_event(self, robot: _Robot, message: Any) -> None:
         state = state_of(message.goal_state.id)
-        if state is State.UNKNOWN:
-            self._unknown(robot)
-            return
         with self._lock:
+            robot.events += 1
             robot.last_heard = self._clock.now()
-            changed = robot.present and state is not robot.state
-            robot.state = state if robot.present else robot.state
-        if changed:
-            self._report(lambda listener: listener.node_state(robot.part, state))
+            assumed = robot.assumed
+        if state is State.UNKNOWN:
+            if not assumed:
+                self._unknown(robot)
+            return
+        self._state(robot, state)
 
     def _mode_event(self, robot: _Robot, message: Any) -> None:
+        """Its mode, while it is active (that of a robot not active is the one it will be activated
+        in; an empty one is the reference's intermediate inference)."""
         mode = str(message.goal_mode.label)
         with self._lock:
+            robot.events += 1
             robot.last_heard = self._clock.now()
-            changed = robot.present and mode != robot.mode
-            robot.mode = mode if robot.present else robot.mode
+            changed = robot.present and robot.state is State.ACTIVE and mode not in ("", robot.mode)
+            if changed:
+                robot.mode = mode
+            if mode == robot.asked and robot.state is State.ACTIVE:
+                robot.asked = None
         if changed:
             self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
 
