@@ -361,11 +361,11 @@ class HostNodeProcess(NodeProcess):
 
 
 class HostManagerProcess(ManagerProcess):
-    """:class:`~ros_processes.ManagerProcess` on the brain side of ``hosts``."""
+    """:class:`~ros_processes.ManagerProcess` on ``side`` of ``hosts`` (the brain's by default)."""
 
-    def __init__(self, hosts: Hosts, model: str, *args: str) -> None:
+    def __init__(self, hosts: Hosts, model: str, *args: str, side: str = "brain") -> None:
         super().__init__(model, *args)
-        self.command = hosts.command("brain", *self.command)
+        self.command = hosts.command(side, *self.command)
         self._hosts = hosts
 
     def start(self) -> NodeProcess:
@@ -522,10 +522,11 @@ class Hosts:
         self._check_exec(process)
         return process
 
-    def manager(self, model: str, *args: str, wait: bool = True) -> ManagerProcess:
-        """``python -m sm_bt.cli manager MODEL ARGS`` on the brain side: serving already (``wait``), or
-        starting in the background (then call ``ready()`` on it)."""
-        process = HostManagerProcess(self, model, *args)
+    def manager(self, model: str, *args: str, wait: bool = True, side: str = "brain") -> ManagerProcess:
+        """``python -m sm_bt.cli manager MODEL ARGS`` on ``side`` (a robot's own manager, in a fleet, is
+        on the robot's): serving already (``wait``), or starting in the background (then call
+        ``ready()`` on it)."""
+        process = HostManagerProcess(self, model, *args, side=side)
         self._managers.append(process)
         if wait:
             process.start()
