@@ -200,6 +200,10 @@ class VirtualClock:
         return len(self._queue)
 
 
+#: A timer fired this late means the process itself stood still (stopped, swapped out, starved).
+STALL = 0.5
+
+
 class WallClock:
     """Real time (``time.monotonic``) with timers run by one background thread, in due order.
 
@@ -207,9 +211,14 @@ class WallClock:
     manager serialises them with everything else through its lock, so a callback may call the
     manager. A callback that raises is logged and does not stop the thread. ``close()`` stops the
     thread; timers still pending are dropped.
+
+    ``resumed``: when a timer last fired ``STALL`` s or more past its time: the process stood still
+    until then, and heard nothing meanwhile (what others said waits in its sockets), so a silence
+    before it is no one else's (the liveness verdicts count from it).
     """
 
     def __init__(self, name: str = "sm_bt-clock") -> None:
+        self.resumed = float("-inf")
         self._condition = threading.Condition()
         self._queue = _Queue(self._condition)
         self._closed = False
@@ -255,6 +264,8 @@ class WallClock:
                 if self._closed:
                     return
                 timer = self._queue.pop()
+                if self.now() - timer.due >= STALL:
+                    self.resumed = self.now()
             callback = timer.callback
             try:
                 timer.fire()

@@ -161,8 +161,11 @@ class Liveness:
 
     def silence_since(self, peer: Peer, now: float, heard: float) -> float:
         """Since when the silence of ``peer``'s process (last heard at ``heard``) counts (lock held):
-        while it is shared by another process of the manager's host, and for a window after that,
-        it does not count (the common cause, see the module's doc), unless it lasted ``COMMON_CAP`` s."""
+        not before the manager itself last stood still (:attr:`WallClock.resumed`: it heard nothing
+        meanwhile); while it is shared by another process of the manager's host, and for a window
+        after that, it does not count (the common cause, see the module's doc), unless it lasted
+        ``COMMON_CAP`` s."""
+        heard = max(heard, getattr(self._clock, "resumed", heard))
         if self.own_host is None or now - heard >= COMMON_CAP:
             return heard
         if self._shared(peer, now):

@@ -384,3 +384,27 @@ def test_a_model_larger_than_a_diagnostics_message_is_published_in_pages_with_a_
     finally:
         publisher.close()
         ros.close()
+
+
+def test_a_manager_that_stood_still_itself_does_not_take_its_nodes_for_gone(
+        node_processes: Starter, start_manager: Any) -> None:
+    """Frozen (SIGSTOP) past its window, the manager heard nothing meanwhile, and neither did its
+    timers run: when it goes on, the silence was its own, and its nodes, which answered all along,
+    are not judged. (Seen in the fleet bench: a robot's manager paused for 1-2 s told all four of its
+    nodes vanished at once when it went on.)"""
+    nodes = node_processes("pilot", "--state", "inactive", env=UDP_ONLY)
+    manager = start_manager("--grace-period", "0.5").ready()
+    wait_until(lambda: len(manager.lines("appeared: inactive")) == len(NODES), 15.0, "nodes not discovered")
+    assert manager.process is not None
+    for _ in range(3):  # the verdict's timer may fall anywhere in the freeze: a few of them
+        os.kill(manager.process.pid, signal.SIGSTOP)
+        try:
+            time.sleep(2 * WINDOW)
+        finally:
+            os.kill(manager.process.pid, signal.SIGCONT)
+        time.sleep(2 * WINDOW)
+    assert not manager.lines("vanished"), manager.lines("vanished")
+    # A process silent itself is still judged, within the window.
+    with Stopped(nodes) as stopped:
+        wait_until(lambda: len(manager.lines("vanished")) == len(NODES), 5.0, "the frozen nodes not judged")
+        assert time.monotonic() - stopped.at <= 2 * WINDOW
