@@ -69,8 +69,9 @@ bench: $(STAMP)
 # tools/reference/build.sh once per source hash (about 10 minutes the first time; cached under
 # ~/.cache/sm_bt/reference/): the same plain-rclpy scenarios on both, a side-by-side report in
 # build/interop/report.md (docs/reference.md, "sm_bt and the reference, measured"), then every CLI
-# example of the documentation against the reference. Exit status 1 if sm-bt manager does not do
-# what a scenario asks.
+# example of the documentation against the reference, and a fleet manager over a robot the reference
+# serves beside one sm-bt manager serves (tests/interop/interop_fleet.py). Exit status 1 if sm-bt
+# manager does not do what a scenario asks.
 # Without access to github.com, SM_BT_GIT_MIRRORS names a folder of git mirrors of the sources.
 # Then py_trees_ros 2.2.2 and devel, from their sources (tools/py_trees_ros.sh): the docs' recipe for
 # hosting a mission in py_trees_ros, and py-trees-blackboard-watcher on the trees sm_bt hosts.
@@ -81,7 +82,8 @@ interop: $(VENV)/.interop
 	SM_BT_REFERENCE="$$prefix" PYTHONPATH=tests/support:tests/interop \
 		$(BIN)/python tests/interop/harness.py --out build/interop && \
 	SM_BT_REFERENCE="$$prefix" SM_BT_TESTS_NEED_ALL=1 PYTHONPATH=tests/support \
-		$(BIN)/python -m pytest -q -p no:cacheprovider --timeout=600 tests/interop/interop_cli.py tests/interop/interop_py_trees_ros.py
+		$(BIN)/python -m pytest -q -p no:cacheprovider --timeout=600 tests/interop/interop_cli.py tests/interop/interop_fleet.py \
+		tests/interop/interop_py_trees_ros.py
 
 $(VENV)/.interop: $(STAMP) pyproject.toml constraints.txt
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[interop]'

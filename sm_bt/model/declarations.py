@@ -18,7 +18,7 @@ from sm_bt.model.types import DEFAULT_MODE, DONT_CARE, PartKind
 PARAMS_KEY = "ros__parameters"
 _KNOWN_KEYS = ("type", "parts", "modes", "rules", "defaultmode", "match", "manager", "system")
 #: The keys that only a remote part has (sm_bt.model.remote_parts).
-REMOTE_KEYS = ("manager", "system", "unknown_means")
+REMOTE_KEYS = ("manager", "system", "served_by")
 #: The type that makes a part remote: served by another manager, a node to this one.
 REMOTE_TYPE = "remote"
 # rmw_validate_node_name / rmw_validate_namespace: letters, digits, underscores; no leading digit.

@@ -9,7 +9,7 @@ modes that manager offers for it::
         manager: /robot1        # its services: /robot1/pilot/change_mode, ... (omitted: the root)
         system: pilot           # omitted: the part's own name
         modes: [__DEFAULT__, f_degraded_mode]
-        unknown_means: unconfigured   # omitted: unreachable (see Remote)
+        served_by: reference    # omitted: sm_bt (sm-bt manager)
 
 To the engine it is a node whose one parameter, :data:`~sm_bt.model.types.REMOTE_MODE`, is the
 mode its manager reports, and whose modes each set it to their name: inference, divergences,
@@ -25,7 +25,7 @@ from sm_bt.model.declarations import PartDecl
 from sm_bt.model.diagnostics import Diagnostics
 from sm_bt.model.errors import Error
 from sm_bt.model.rcl_yaml import YScalar, describe
-from sm_bt.model.types import REMOTE_MODE, REMOTE_UNKNOWN_MEANS, Location, Model, NodeMode, NodePart, ParamSpec, Remote
+from sm_bt.model.types import REMOTE_MANAGERS, REMOTE_MODE, Location, Model, NodeMode, NodePart, ParamSpec, Remote
 
 # rmw_validate_namespace: an absolute namespace of segments as node names have them.
 _NAMESPACE = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)*/?")
@@ -36,15 +36,14 @@ def build_remote(decl: PartDecl, diag: Diagnostics) -> NodePart | None:
     """The remote part as the engine sees it, or ``None`` when it cannot be built (reported)."""
     manager = _text(decl, "manager", "", diag)
     system = _text(decl, "system", decl.name.rsplit("/", 1)[-1], diag)
-    unknown_means = _text(decl, "unknown_means", REMOTE_UNKNOWN_MEANS[0], diag)
-    if manager is None or system is None or unknown_means is None or decl.modes is None \
+    served_by = _text(decl, "served_by", REMOTE_MANAGERS[0], diag)
+    if manager is None or system is None or served_by is None or decl.modes is None \
             or decl.default_mode is None:
         return None
-    if unknown_means not in REMOTE_UNKNOWN_MEANS:
-        diag.error(_line(decl, "unknown_means"), f"unknown_means {unknown_means!r} of remote part {decl.name!r} is "
-                                                 f"not one of {', '.join(REMOTE_UNKNOWN_MEANS)}: 'unconfigured' for a "
-                                                 "manager that learns states only from its nodes' events (the "
-                                                 "reference's mode_manager), else leave it out")
+    if served_by not in REMOTE_MANAGERS:
+        diag.error(_line(decl, "served_by"), f"served_by {served_by!r} of remote part {decl.name!r} is not "
+                                             f"{' or '.join(REMOTE_MANAGERS)}: 'reference' for micro-ROS/system_modes' "
+                                             "mode_manager, else leave it out (sm-bt manager)")
         return None
     if not _NAMESPACE.fullmatch(manager):
         diag.error(_line(decl, "manager"), f"manager {manager!r} of remote part {decl.name!r} is not a ROS 2 "
@@ -59,7 +58,7 @@ def build_remote(decl: PartDecl, diag: Diagnostics) -> NodePart | None:
         where = Location(diag.file, key.line)
         modes[key.text] = NodeMode(key.text, {REMOTE_MODE: ParamSpec(REMOTE_MODE, key.text, where)}, where)
     return NodePart(decl.name, decl.default_mode, modes, (), Location(diag.file, decl.line),
-                    Remote(manager.rstrip("/"), system.lstrip("/"), unknown_means))
+                    Remote(manager.rstrip("/"), system.lstrip("/"), served_by))
 
 
 def _text(decl: PartDecl, key: str, default: str, diag: Diagnostics) -> str | None:

@@ -32,8 +32,8 @@ DONT_CARE = "__DONTCARE__"
 #: The one parameter of a remote part: to the engine a remote part is a node whose parameter is the
 #: mode its manager reports, and whose modes each set it to their name (sm_bt.model.remote_parts).
 REMOTE_MODE = "__mode__"
-#: What a remote part's ``unknown_means`` may say (:class:`Remote`); the first is the default.
-REMOTE_UNKNOWN_MEANS = ("unreachable", "unconfigured")
+#: The managers a remote part may be served by (``served_by``, :class:`Remote`); the first is the default.
+REMOTE_MANAGERS = ("sm_bt", "reference")
 
 
 class PartKind(str, enum.Enum):
@@ -209,14 +209,13 @@ class Rule:
 @dataclass(frozen=True)
 class Remote:
     """Where a remote part is served: the namespace of its manager's services (``""``: the root)
-    and the part's name in that manager's model. ``unknown_means``: what its manager's ``unknown``
-    means before that manager has ever known the part: ``unreachable`` (its nodes are not
-    there yet), or ``unconfigured`` for a manager that learns states only from its nodes' events
-    (the reference's ``mode_manager``), whose nodes wait unconfigured."""
+    and the part's name in that manager's model. ``served_by``: which manager that is, ``sm_bt``
+    (``sm-bt manager``) or ``reference`` (micro-ROS/system_modes' ``mode_manager``, which learns
+    states only from its nodes' events and sends its own from a 1 s timer)."""
 
     manager: str
     system: str
-    unknown_means: str = REMOTE_UNKNOWN_MEANS[0]
+    served_by: str = REMOTE_MANAGERS[0]
 
     @property
     def fqn(self) -> str:

@@ -19,9 +19,14 @@ the reference's ``mode_manager``. :class:`RemoteBackend` speaks to it as any cli
   out of reach ("no answer from the manager of robot1 ..."), and the fleet's rules react. While
   out of reach it is asked again every probe; the first answer is its reappearance. A manager
   that answers ``unknown`` has lost its part (its nodes are out of its reach), except before it
-  has ever known it, when the part's ``unknown_means`` says what that means: the reference learns
-  states only from its nodes' events, so until a node moves it knows nothing of nodes that wait
-  unconfigured (``unknown_means: unconfigured``).
+  has ever known it: the reference (``served_by: reference``) learns states only from its nodes'
+  events, so until a node moves it knows nothing of nodes that wait unconfigured, and the part is
+  taken for unconfigured;
+* the reference's answers run ahead of its events, and it takes its own node ``mode_event``s (sent
+  at its next tick) for news of its nodes: a request made before that tick is then planned from a
+  wrong view and never ends (seen: ``deactivating`` for good). So after a change it accepted, the
+  fleet takes the reference's word from its events, from its answers only ``REFERENCE_EVENTS`` s
+  later (it sometimes sends no event at all), and makes its next request no sooner.
 
 Every call has a timeout. Calls and reports run on the backend's node and clock; the listener is
 never called with this backend's lock held.
@@ -53,6 +58,13 @@ from sm_bt.ros.peers import SLACK, Link, state_of
 
 log = logging.getLogger("sm_bt.ros.remote_parts")
 
+#: The reference sends a change's events at its 1 s timer's next tick, or the one after: its answers
+#: are taken for news that long after a change it accepted (it sometimes sends no event at all).
+REFERENCE_EVENTS = 2.2
+#: After an event of the reference, its next request waits this long: its own node mode_events of
+#: the same tick, which it takes for news of its nodes, are back with it by then.
+REFERENCE_ECHO = 0.2
+
 #: Volatile: it matches sm-bt manager's latched writers and the reference's volatile ones alike;
 #: what came before is read with get_state/get_mode instead.
 _EVENTS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
@@ -66,7 +78,7 @@ class _Robot:
     get_state: Any
     change_mode: Any
     get_mode: Any
-    unknown_means: str
+    reference: bool  # served by the reference's mode_manager
     subscriptions: list[Any] = field(default_factory=list)
     present: bool = False
     last_heard: float = float("-inf")
@@ -74,8 +86,10 @@ class _Robot:
     #: As reported to the engine; ``mode`` of a robot that is not active: the one to activate it in.
     state: State = State.UNKNOWN
     mode: str = ""
-    known: bool = False  # its manager has known its state (what it says of it before: unknown_means)
-    assumed: bool = False  # present on unknown_means while its manager still answers unknown
+    known: bool = False  # its manager has known its state
+    assumed: bool = False  # taken for unconfigured while the reference still answers unknown
+    reads_from: float = float("-inf")  # its answers are news from then on (the reference, after a change)
+    requests_from: float = float("-inf")  # its next change request no sooner (the reference, after a change)
     events: int = 0  # events received: an answer to a call sent before the last one is older news
     asked: str | None = None  # a mode its manager accepted and has not reported yet: read at each probe
 
@@ -104,7 +118,7 @@ class RemoteBackend:
             self._robots[part.name] = _Robot(
                 part.name, fqn, node.create_client(ChangeState, f"{fqn}/change_state"),
                 node.create_client(GetState, f"{fqn}/get_state"), node.create_client(ChangeMode, f"{fqn}/change_mode"),
-                node.create_client(GetMode, f"{fqn}/get_mode"), part.remote.unknown_means)
+                node.create_client(GetMode, f"{fqn}/get_mode"), part.remote.served_by == "reference")
 
     @property
     def clock(self) -> WallClock:
@@ -143,17 +157,17 @@ class RemoteBackend:
         robot = self._robots[node]
         if transition is Transition.ACTIVATE:
             mode = robot.mode or DEFAULT_MODE
-            self._call(robot, robot.change_mode, ChangeMode.Request(mode_name=mode), f"change_mode {mode} (activate)",
-                       lambda response: self._accepted(robot, response.success, mode, done,
-                                                       f"the manager of {node} refused to activate it in mode {mode}"),
-                       lambda why: done(CallResult(False, why)))
+            refusal = f"the manager of {node} refused to activate it in mode {mode}"
+            self._change(robot, robot.change_mode, ChangeMode.Request(mode_name=mode), f"change_mode {mode} (activate)",
+                         lambda response: self._accepted(robot, response.success, mode, done, refusal),
+                         lambda why: done(CallResult(False, why)))
             return
         message = TransitionMessage(id=int(transition.value), label=transition.label)
         refused = CallResult(False, f"the manager of {node} refused {transition.label}", refused=True)
         label = f"change_state {transition.label}"
-        self._call(robot, robot.change_state, ChangeState.Request(transition=message), label,
-                   lambda response: done(CallResult(True) if response.success else refused),
-                   lambda why: done(CallResult(False, why)))
+        self._change(robot, robot.change_state, ChangeState.Request(transition=message), label,
+                     lambda response: done(CallResult(True) if response.success else refused),
+                     lambda why: done(CallResult(False, why)))
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         robot = self._robots[node]
@@ -169,10 +183,10 @@ class RemoteBackend:
         if kept:  # for its activation
             self._clock.call_later(0.0, lambda: self._kept(robot, mode, done))
             return
-        self._call(robot, robot.change_mode, ChangeMode.Request(mode_name=mode), f"change_mode {mode}",
-                   lambda response: self._accepted(robot, response.success, mode, done,
-                                                   f"the manager of {node} refused mode {mode}"),
-                   lambda why: done(CallResult(False, why)))
+        self._change(robot, robot.change_mode, ChangeMode.Request(mode_name=mode), f"change_mode {mode}",
+                     lambda response: self._accepted(robot, response.success, mode, done,
+                                                     f"the manager of {node} refused mode {mode}"),
+                     lambda why: done(CallResult(False, why)))
 
     def _kept(self, robot: _Robot, mode: str, done: Done) -> None:
         self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
@@ -214,8 +228,9 @@ class RemoteBackend:
     def _judge(self, robot: _Robot) -> None:
         """Out of reach once nothing was heard from its manager for the window."""
         with self._lock:
-            silent = (self._listener is not None and robot.present
-                      and self._clock.now() - robot.last_heard >= self.liveness_timeout)
+            # Not before this process last stood still itself: it heard nothing meanwhile.
+            heard = max(robot.last_heard, self._clock.resumed)
+            silent = self._listener is not None and robot.present and self._clock.now() - heard >= self.liveness_timeout
             if silent:
                 robot.present = False
         if silent:
@@ -233,11 +248,12 @@ class RemoteBackend:
             robot.last_heard = self._clock.now()
             if state is State.UNKNOWN:
                 action = "keep" if robot.assumed else "assume" if (
-                    not robot.known and not robot.present and robot.unknown_means == "unconfigured") else "lost"
+                    not robot.known and not robot.present and robot.reference) else "lost"
             elif not robot.present:
                 action = "read"
             else:  # no event since it was asked: the answer is the newer news
-                action = "correct" if events == robot.events and state is not robot.state else "keep"
+                action = "correct" if (events == robot.events and state is not robot.state
+                                       and self._clock.now() >= robot.reads_from) else "keep"
         if action == "lost":
             self._unknown(robot)
         elif action == "assume":
@@ -269,7 +285,7 @@ class RemoteBackend:
             robot.assumed, robot.known = assumed, robot.known or not assumed
             robot.last_heard = self._clock.now()
         if assumed:
-            log.info("%s: its manager knows no state of %s yet: taken for unconfigured (unknown_means)",
+            log.info("%s: its manager (the reference) knows no state of %s yet: taken for unconfigured",
                      robot.part, robot.fqn)
         self._report(lambda listener: listener.node_appeared(robot.part, NodeReport(state, {REMOTE_MODE: mode})))
 
@@ -296,10 +312,11 @@ class RemoteBackend:
             mode = str(response.current_mode)
             with self._lock:
                 news = (robot.present and robot.state is State.ACTIVE and events == robot.events
+                        and self._clock.now() >= robot.reads_from
                         and mode not in ("", "unknown") and mode != robot.mode and only in (None, mode))
                 if news:
                     robot.mode = mode
-                if mode == robot.asked and robot.state is State.ACTIVE:
+                if mode == robot.asked and robot.state is State.ACTIVE and self._clock.now() >= robot.reads_from:
                     robot.asked = None
             if news:
                 self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
@@ -309,8 +326,7 @@ class RemoteBackend:
     def _transition_event(self, robot: _Robot, message: Any) -> None:
         state = state_of(message.goal_state.id)
         with self._lock:
-            robot.events += 1
-            robot.last_heard = self._clock.now()
+            self._heard_event(robot)
             assumed = robot.assumed
         if state is State.UNKNOWN:
             if not assumed:
@@ -323,8 +339,7 @@ class RemoteBackend:
         in; an empty one is the reference's intermediate inference)."""
         mode = str(message.goal_mode.label)
         with self._lock:
-            robot.events += 1
-            robot.last_heard = self._clock.now()
+            self._heard_event(robot)
             changed = robot.present and robot.state is State.ACTIVE and mode not in ("", robot.mode)
             if changed:
                 robot.mode = mode
@@ -333,7 +348,32 @@ class RemoteBackend:
         if changed:
             self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
 
+    def _heard_event(self, robot: _Robot) -> None:
+        """(With the lock held.) An event of its manager: the reference has ticked."""
+        robot.events += 1
+        robot.last_heard = self._clock.now()
+        if robot.reference:
+            robot.requests_from = min(robot.requests_from, robot.last_heard + REFERENCE_ECHO)
+
     # -- calls ------------------------------------------------------------------------------------------------
+
+    def _change(self, robot: _Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
+                failed: Callable[[str], None]) -> None:
+        """A change request (see :meth:`_call`); to the reference, no sooner than its view of the last
+        one is whole (``REFERENCE_EVENTS``, ``REFERENCE_ECHO``), and its answers are news only after that."""
+        with self._lock:
+            wait = robot.requests_from - self._clock.now() if robot.reference else 0.0
+        if wait > 0:
+            self._clock.call_later(wait, lambda: self._change(robot, client, request, label, answered, failed))
+            return
+
+        def accepted(response: Any) -> None:
+            if robot.reference and response.success:
+                with self._lock:
+                    robot.reads_from = robot.requests_from = self._clock.now() + REFERENCE_EVENTS
+            answered(response)
+
+        self._call(robot, client, request, label, accepted, failed)
 
     def _call(self, robot: _Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
               failed: Callable[[str], None], timeout: float | None = None) -> None:

@@ -55,10 +55,10 @@ def test_a_remote_part_is_a_node_whose_one_parameter_is_its_mode() -> None:
     assert model.parts["fleet"].modes["NIGHT"].entries["robot1"].target.mode == "f_energy_saving_mode"  # type: ignore[union-attr]
 
 
-def test_what_unknown_means_at_start_is_unreachable_unless_the_part_says_unconfigured() -> None:
-    model = load_model_text(FLEET.format(robot2=ROBOT2 + "    unknown_means: unconfigured\n"))
-    assert model.parts["robot1"].remote.unknown_means == "unreachable"  # type: ignore[union-attr]
-    assert model.parts["robot2"].remote == Remote("", "robot2", "unconfigured")  # type: ignore[union-attr]
+def test_a_remote_part_is_served_by_sm_bt_manager_unless_it_says_the_reference() -> None:
+    model = load_model_text(FLEET.format(robot2=ROBOT2 + "    served_by: reference\n"))
+    assert model.parts["robot1"].remote.served_by == "sm_bt"  # type: ignore[union-attr]
+    assert model.parts["robot2"].remote == Remote("", "robot2", "reference")  # type: ignore[union-attr]
 
 
 def test_modes_may_be_listed_on_lines_and_a_default_named() -> None:
@@ -83,11 +83,10 @@ def test_modes_may_be_listed_on_lines_and_a_default_named() -> None:
      "22: system '2pilot' of remote part 'robot2' is not a part name: use letters, digits and underscores, "
      "as in that manager's model"),
     (ROBOT2 + "    system: [a, b]\n", "22: 'system' of remote part 'robot2' must be a name, not a list"),
-    (ROBOT2 + "    unknown_means: inactive\n",
-     "22: unknown_means 'inactive' of remote part 'robot2' is not one of unreachable, unconfigured: "
-     "'unconfigured' for a manager that learns states only from its nodes' events (the reference's "
-     "mode_manager), else leave it out"),
-    (ROBOT2 + "    unknown_means: 3\n", "22: 'unknown_means' of remote part 'robot2' must be a name, not '3'"),
+    (ROBOT2 + "    served_by: system_modes\n",
+     "22: served_by 'system_modes' of remote part 'robot2' is not sm_bt or reference: 'reference' for "
+     "micro-ROS/system_modes' mode_manager, else leave it out (sm-bt manager)"),
+    (ROBOT2 + "    served_by: 3\n", "22: 'served_by' of remote part 'robot2' must be a name, not '3'"),
     (ROBOT2 + "    parts: [a]\n",
      "22: remote part 'robot2' cannot have 'parts': its manager holds its parts, parameters and rules; remove it"),
     (ROBOT2 + "    match: {x: {tolerance: 1}}\n",

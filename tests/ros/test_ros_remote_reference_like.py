@@ -127,7 +127,7 @@ def scripted(ros_context: RosContext) -> ScriptedManager:
     return ScriptedManager(ros_context)
 
 
-def _fleet(tmp_path: Path, extra: str = "    unknown_means: unconfigured\n") -> RosRuntime:
+def _fleet(tmp_path: Path, extra: str = "    served_by: reference\n") -> RosRuntime:
     path = tmp_path / "fleet.yaml"
     path.write_text(FLEET.format(extra=extra), encoding="utf-8")
     return RosRuntime(load_model(path), node_name="fleet_manager", manager_options={"request_timeout": 10.0})
@@ -164,7 +164,7 @@ def test_a_robot_its_manager_knows_nothing_of_is_taken_for_unconfigured_and_brou
     assert str(manager.actual("fleet")) == "active.FAST"
 
 
-def test_without_unknown_means_a_robot_its_manager_knows_nothing_of_stays_out_of_reach(
+def test_served_by_sm_bt_a_robot_its_manager_knows_nothing_of_stays_out_of_reach(
         scripted: ScriptedManager, tmp_path: Path) -> None:
     runtime = _fleet(tmp_path, extra="")
     try:

@@ -48,10 +48,10 @@ class ReferenceManager(NodeProcess):
     """``mode_manager --ros-args -p modelfile:=MODEL``: ready once its log lists the services of
     every part of the model (it serves nothing before that)."""
 
-    def __init__(self, model: Path, prefix: Path | None = None) -> None:
+    def __init__(self, model: Path, prefix: Path | None = None, namespace: str = "/") -> None:
         super().__init__(str(model))
         self.command = [str((prefix or reference_prefix()) / "bin" / "mode_manager"), "--ros-args",
-                        "-p", f"modelfile:={model}"]
+                        "-p", f"modelfile:={model}", "-r", f"__ns:={namespace}"]
         self._parts = len(load_model(model, strict=False).parts)
         self._listed = 0
         self._lock = threading.Lock()
