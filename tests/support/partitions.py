@@ -112,8 +112,8 @@ def run(hosts: Hosts, cycles: int, seed: int) -> Cycles:
     return record
 
 
-def ask(hosts: Hosts, record: Cycles, mode: str) -> None:
-    code, _, err = hosts.sm_bt("mode", "set", "pilot", mode, "--timeout", "5")
+def ask(hosts: Hosts, record: Cycles, mode: str, system: str = "pilot") -> None:
+    code, _, err = hosts.sm_bt("mode", "set", system, mode, "--timeout", "5")
     if code == 0:
         record.accepted = mode
         record.say(f"asked {mode}: accepted")
@@ -122,19 +122,20 @@ def ask(hosts: Hosts, record: Cycles, mode: str) -> None:
         record.say(f"asked {mode}: refused ({err.strip()[-160:]})")
 
 
-def settle(diagnostics: Watch, record: Cycles, since: float, view_from: float = -math.inf) -> None:
-    """Every node reachable, and the pilot OK (at its target, nothing running), within SETTLE s of
+def settle(diagnostics: Watch, record: Cycles, since: float, view_from: float = -math.inf, *,
+           system: str = "pilot", nodes: tuple[str, ...] = NODES) -> None:
+    """Every node reachable, and the system OK (at its target, nothing running), within SETTLE s of
     ``since``, as told on /diagnostics from ``view_from`` on (an older view may not know yet)."""
     give_up = since + SETTLE
     while True:
         view = latest(diagnostics, view_from)
-        pilot = view.get("pilot", {})
-        settled = (all(view.get(node, {}).get("reachable") == "true" for node in NODES)
+        pilot = view.get(system, {})
+        settled = (all(view.get(node, {}).get("reachable") == "true" for node in nodes)
                    and pilot.get("last_request_outcome") != "running"
                    and (not pilot.get("target") or pilot.get("actual") == pilot.get("target")))
         if settled:
             record.settle_times.append(time.monotonic() - since)
-            record.say(f"settled: pilot {pilot.get('actual')}")
+            record.say(f"settled: {system} {pilot.get('actual')}")
             return
         if time.monotonic() > give_up:
             raise AssertionError(f"not settled {SETTLE:g} s after the heal: {view}\n{record.history()}")
