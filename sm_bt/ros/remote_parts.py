@@ -335,12 +335,15 @@ class RemoteBackend:
         self._state(robot, state)
 
     def _mode_event(self, robot: _Robot, message: Any) -> None:
-        """Its mode, while it is active (that of a robot not active is the one it will be activated
-        in; an empty one is the reference's intermediate inference)."""
+        """Its mode, unless it is inactive or unconfigured (the mode of such a robot is the one it
+        will be activated in; an empty one is the reference's intermediate inference). A mode event
+        says "active in it", and may overtake the state event of a switch's end: taken while the
+        robot is activating, the fleet never sees it back in its old mode meanwhile."""
         mode = str(message.goal_mode.label)
         with self._lock:
             self._heard_event(robot)
-            changed = robot.present and robot.state is State.ACTIVE and mode not in ("", robot.mode)
+            changed = (robot.present and robot.state not in (State.INACTIVE, State.UNCONFIGURED)
+                       and mode not in ("", robot.mode))
             if changed:
                 robot.mode = mode
             if mode == robot.asked and robot.state is State.ACTIVE:

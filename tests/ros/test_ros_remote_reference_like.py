@@ -62,6 +62,7 @@ class ScriptedManager:
         self.state, self.mode = State.UNKNOWN, "unknown"
         self.requests: list[str] = []
         self.events = True  # publish events for its moves (the reference sometimes does not)
+        self.sm_bt_switch = False  # switch an active system as sm-bt manager tells it (switch_as_sm_bt)
         self._lock = threading.Lock()
         prefix = "/robot1/pilot"
         self._transition_events = node.create_publisher(TransitionEvent, f"{prefix}/transition_event", 10)
@@ -111,9 +112,27 @@ class ScriptedManager:
             self._later(State.INACTIVE, "")
         return response
 
+    def switch_as_sm_bt(self, mode: str) -> None:
+        """A switch of an active system as sm-bt manager tells it: activating, then at its end the
+        mode event before the state event (both at once, on topics of their own)."""
+        self.move(State.ACTIVATING, self.mode)
+        time.sleep(DELAY)
+        with self._lock:
+            self.state, self.mode = State.ACTIVE, mode
+        mode_event = ModeEvent()
+        mode_event.goal_mode.label = mode
+        self._mode_events.publish(mode_event)
+        time.sleep(DELAY)  # the state event overtaken (another topic, another path)
+        event = TransitionEvent()
+        event.start_state.id, event.goal_state.id = int(State.ACTIVATING.value), int(State.ACTIVE.value)
+        self._transition_events.publish(event)
+
     def _change_mode(self, request: ChangeMode.Request, response: ChangeMode.Response) -> ChangeMode.Response:
         self.requests.append(f"change_mode {request.mode_name}")
         response.success = True
+        if self.sm_bt_switch and self.state is State.ACTIVE:
+            threading.Thread(target=self.switch_as_sm_bt, args=(request.mode_name,)).start()
+            return response
         with self._lock:
             redundant = self.state is State.ACTIVE and self.mode == request.mode_name
             configured = self.state in (State.INACTIVE, State.ACTIVE)
@@ -194,3 +213,35 @@ def test_without_events_the_fleet_learns_a_robots_moves_from_its_answers(
     # Someone deactivates it behind the fleet's back and no event comes: the probes tell.
     scripted.move(State.INACTIVE, "")
     wait_until(lambda: manager.actual("robot1").state is State.INACTIVE, 3.0, "the silent move never seen")
+
+
+def test_a_switch_whose_mode_event_overtakes_its_end_is_never_seen_back_in_the_old_mode(
+        scripted: ScriptedManager, tmp_path: Path) -> None:
+    scripted.move(State.ACTIVE, "f_normal_mode")
+    scripted.sm_bt_switch = True
+    runtime = _fleet(tmp_path, extra="")
+    try:
+        manager = runtime.manager
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+        seen: list[str] = []
+        watching = threading.Event()
+
+        def watch() -> None:
+            while not watching.is_set():
+                view = str(manager.actual("robot1"))
+                if not seen or seen[-1] != view:
+                    seen.append(view)
+                time.sleep(0.001)
+
+        watcher = threading.Thread(target=watch)
+        watcher.start()
+        try:
+            _done(runtime, "FAST")
+            time.sleep(2 * DELAY)
+        finally:
+            watching.set()
+            watcher.join(5.0)
+        assert seen[0] == "active.f_normal_mode" and seen[-1] == "active.f_performance_mode", seen
+        assert "active.f_normal_mode" not in seen[1:], seen
+    finally:
+        runtime.close()
