@@ -11,6 +11,8 @@ import sys
 
 from sm_bt.cli.arguments import add_view_arguments, non_negative, positive_int
 from sm_bt.cli.common import CliError, UsageError
+from sm_bt.trees.fleet.demo import SPEED as FLEET_SPEED
+from sm_bt.trees.fleet.demo import FleetDemo, FleetOptions
 from sm_bt.trees.mission_xml import TreeFileError
 from sm_bt.trees.pilot.demo import DEGRADED_FOR, REPAIR_AT, TREES, Auto, Demo, Options
 
@@ -29,9 +31,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "on simulated nodes: handling the failure takes real seconds there)")
     parser.add_argument("--cycles", type=positive_int, default=2,
                         help="patrol rounds of the seven waypoints (default 2)")
-    parser.add_argument("--speed", type=non_negative, default=35.0,
+    parser.add_argument("--speed", type=non_negative, default=None,
                         help="world (virtual) seconds per wall second; 0 runs as fast as possible, "
-                             "simulated only (default 35)")
+                             f"simulated only (default {PILOT_SPEED:g}; with --fleet {FLEET_SPEED:g})")
+    parser.add_argument("--fleet", action="store_true",
+                        help="a fleet's shift instead (models/fleet.yaml): two robots, each the pilot under a "
+                             "manager of its own, driven by the fleet's manager; robot1 is cut off from the fleet "
+                             "and healed meanwhile (simulated)")
     parser.add_argument("--rules", action="store_true",
                         help="the model with the laser rule (pilot_rules): the manager itself switches to "
                              "degraded mode when the laser fails, and holds it there against lower-priority "
@@ -49,6 +55,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      "world runs --speed times faster.")
 
 
+#: The pilot demo's default --speed.
+PILOT_SPEED = 35.0
+#: The pilot demo's options, which the fleet's shift does not take (with their defaults).
+PILOT_ONLY = {"tree": None, "laser_failure_at": 15.0, "laser_repair_at": Auto.AUTO, "cycles": 2, "rules": False,
+              "ros": False}
+
+
+def _fleet(args: argparse.Namespace) -> int:
+    given = [f"--{name.replace('_', '-')}" for name, default in PILOT_ONLY.items() if getattr(args, name) != default]
+    if given:
+        raise UsageError(f"--fleet runs the fleet's shift, simulated: {', '.join(given)} belong to the pilot demo")
+    options = FleetOptions(speed=FLEET_SPEED if args.speed is None else args.speed, quiet=args.quiet,
+                           view=args.view, view_host=args.host, record=args.record, linger=args.view is not None)
+    try:
+        return FleetDemo(options).run()
+    except OSError as error:  # the view's port
+        raise CliError(f"cannot serve the view on {options.view_host}:{options.view}: "
+                       f"{error.strerror or error} (choose another port: --view PORT, 0 for any)") from None
+
+
 def _tree(text: str) -> str:
     if text in TREES or text.endswith(".xml"):
         return text
@@ -63,8 +89,10 @@ def _time(text: str) -> float | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.fleet:
+        return _fleet(args)
     options = Options(laser_failure_at=args.laser_failure_at, laser_repair_at=args.laser_repair_at,
-                      cycles=args.cycles, speed=args.speed, quiet=args.quiet,
+                      cycles=args.cycles, speed=PILOT_SPEED if args.speed is None else args.speed, quiet=args.quiet,
                       tree=args.tree or ("rules" if args.rules else "pilot"), ros=args.ros,
                       rules=args.rules, view=args.view, view_host=args.host, record=args.record,
                       linger=args.view is not None)

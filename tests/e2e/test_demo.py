@@ -218,3 +218,45 @@ def test_the_demo_piped_to_a_file_is_plain_unwrapped_text(tmp_path: Path) -> Non
     summary_modes = next(line for line in lines if line.startswith("  pilot modes: "))
     assert len(summary_modes) > 120 and summary_modes.endswith(")")
     assert any(len(line) > 120 and line.endswith("-> unconfigured)") for line in lines)
+
+
+#: What the fleet's shift tells, in order: the day shift through each robot's own manager, robot1
+#: cut off and lost, the fleet's rule, the heal, robot1 restored by its own manager, the night, the
+#: end of the shift (request numbers left out: they count every request of the process).
+FLEET_STORY = (
+    "fleet -> change_mode fleet __DEFAULT__ started [tree]",
+    "robot1's manager -> change_mode pilot __DEFAULT__ started",
+    "fleet <- change_mode fleet __DEFAULT__ succeeded",
+    "robot1 is cut off from the fleet (its own manager and nodes go on)",
+    "fleet ~~ robot1: target active.__DEFAULT__, actual unknown (fault: no answer from the manager of robot1",
+    "fleet !! rule robot1_lost: robot1 is unknown -> active.NIGHT",
+    "robot1 is reachable again",
+    "robot1's manager -> change_mode pilot f_energy_saving_mode started",
+    "fleet ~~ robot1 is back on target active.f_energy_saving_mode",
+    "fleet -> change_state fleet deactivate started [tree]",
+    "shift SUCCESS",
+    "fleet modes: active.__DEFAULT__ (0.3 s) -> active.NIGHT (7.4 s)",
+    "robots, by their own managers: robot1 inactive, robot2 inactive; as the fleet sees them: robot1 inactive, "
+    "robot2 inactive",
+    "as expected",
+)
+
+
+def test_the_fleet_demo_tells_a_shift_with_a_robot_cut_off_and_healed(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--fleet", "--speed", "0"]) == 0
+    assert_in_order(re.sub(r"#\d+ ", "", capsys.readouterr().out), FLEET_STORY)
+
+
+def test_the_fleet_demo_takes_none_of_the_pilot_demos_options(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--fleet", "--cycles", "3", "--rules"]) == 2
+    assert "--fleet runs the fleet's shift, simulated: --cycles, --rules belong to the pilot demo" in \
+        capsys.readouterr().err
+
+
+def test_a_fleet_shift_whose_robot_never_comes_back_is_told_not_as_expected() -> None:
+    from sm_bt.trees.fleet.demo import FleetDemo, FleetOptions
+
+    out = io.StringIO()
+    assert FleetDemo(FleetOptions(speed=0.0, heal_at=None), Console(file=out, width=200)).run() == 1
+    text = out.getvalue()
+    assert "shift FAILURE" in text and "NOT as expected" in text, text

@@ -23,7 +23,7 @@ pytestmark = pytest.mark.ros
 
 #: Two robots (/robot1/pilot, /robot2/pilot) under a fleet of __DEFAULT__ and NIGHT: the model
 #: of docs/model-format.md, "Remote parts".
-FLEET = Path(__file__).resolve().parents[2] / "docs" / "examples" / "fleet.yaml"
+FLEET = Path(__file__).resolve().parents[2] / "models" / "fleet.yaml"
 #: The fleet's liveness window (RemoteBackend's default), and what the verdict
 #: may take beyond them on a loaded machine.
 WINDOW, LATENCY = 0.9, 0.3

@@ -453,3 +453,31 @@ def test_a_model_of_thousands_of_parts_shows_what_matters_and_how_many_there_are
     assert summary and summary.group(1) == "2,223 parts (223 systems, 2,000 nodes): 69 diverge; 8 shown", summary
     rows = re.findall(r'<tr data-part="([^"]+)"', dom)
     assert rows == ["root", "s1_120", "s1_121", "s1_122", "s1_123", "s1_124", "s1_125", "s2_12"], rows
+
+
+def test_the_fleet_demos_view_shows_the_fleet_tree_and_a_band_per_robot_while_one_is_cut_off(
+        tmp_path: Path) -> None:
+    """sm-bt demo --fleet: at 5.5 s robot1 is cut off; the table has the fleet and both robots
+    (robot1 unknown), the timeline a band for each, and the tree waits for the night."""
+    from sm_bt.trees.fleet.demo import FleetDemo, FleetOptions
+
+    recording = tmp_path / "fleet.jsonl"
+    demo = FleetDemo(FleetOptions(speed=0.0, quiet=True, record=str(recording)), Console(file=io.StringIO()))
+    assert demo.run() == 0
+    server = ViewServer(port=0, frames=read_recording(recording))
+    try:
+        dom = _browse(f"{server.url}?check&at=5.5", screenshot=SHOTS / "fleet-1280x800.png")
+    finally:
+        server.close()
+    report = _report(dom)
+    width, height = report["viewport"]
+    assert report["document"][0] <= width and report["document"][1] <= height, report["document"]
+    assert [item["name"] for item in report["running"]] == ["fleet shift", "until the night"], report["running"]
+    for item in report["running"] + report["cells"] + report["axis"]:
+        assert _inside(item["box"], [0, 0, width, height]) and _inside(item["box"], item["clip"]), item
+        assert not item.get("elided"), item
+    rows = re.findall(r'<tr data-part="(\w+)"[^>]*><td>\w+</td><td>[^<]*(?:<wbr>[^<]*)*</td><td>([^<]*)', dom)
+    assert [part for part, _ in rows] == ["fleet", "robot1", "robot2"], rows
+    assert dict(rows)["robot1"] == "unknown", rows
+    bands = re.findall(r'<text [^>]*class="part">(\w+)</text>', dom)
+    assert bands == ["fleet", "robot1", "robot2"], bands
