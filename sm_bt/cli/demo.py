@@ -11,8 +11,7 @@ import sys
 
 from sm_bt.cli.arguments import add_view_arguments, non_negative, positive_int
 from sm_bt.cli.common import CliError, UsageError
-from sm_bt.trees.fleet.demo import SPEED as FLEET_SPEED
-from sm_bt.trees.fleet.demo import FleetDemo, FleetOptions
+from sm_bt.trees.fleet import DEMO_SPEED as FLEET_SPEED
 from sm_bt.trees.mission_xml import TreeFileError
 from sm_bt.trees.pilot.demo import DEGRADED_FOR, REPAIR_AT, TREES, Auto, Demo, Options
 
@@ -66,6 +65,8 @@ def _fleet(args: argparse.Namespace) -> int:
     given = [f"--{name.replace('_', '-')}" for name, default in PILOT_ONLY.items() if getattr(args, name) != default]
     if given:
         raise UsageError(f"--fleet runs the fleet's shift, simulated: {', '.join(given)} belong to the pilot demo")
+    from sm_bt.trees.fleet.demo import FleetDemo, FleetOptions
+
     options = FleetOptions(speed=FLEET_SPEED if args.speed is None else args.speed, quiet=args.quiet,
                            view=args.view, view_host=args.host, record=args.record, linger=args.view is not None)
     try:

@@ -17,6 +17,8 @@ from sm_bt.behaviours import ChangeMode, ChangeState, WaitForMode
 FLEET = "fleet"
 #: The longest the tree waits for the night (seconds of the manager's clock).
 NIGHT_WITHIN = 60.0
+#: The demo's virtual seconds per wall second by default: the shift takes about two seconds to watch.
+DEMO_SPEED = 4.0
 
 
 def create_root() -> py_trees.behaviour.Behaviour:

@@ -25,7 +25,7 @@ from sm_bt.engine.events import Event, EventKind, Subscription
 from sm_bt.model.types import NodePart
 from sm_bt.monitor import terminal_console
 from sm_bt.sim.remotes import RemoteManagers, simulated_fleet
-from sm_bt.trees.fleet import FLEET, create_root
+from sm_bt.trees.fleet import DEMO_SPEED, FLEET, create_root
 from sm_bt.view import View, attach_view
 
 #: Each robot's model (bundled), and the robot the demo cuts off.
@@ -34,8 +34,6 @@ ROBOT_MODEL, CUT_ROBOT = "pilot", "robot1"
 TRANSITION_DELAY = 0.3
 #: Virtual seconds between ticks, and the longest the shift may take.
 TICK, LIMIT = 0.1, 120.0
-#: Virtual seconds per wall second by default: the shift takes about two seconds to watch.
-SPEED = 4.0
 
 
 def _starts(event: Event) -> bool:
@@ -48,7 +46,7 @@ def _starts(event: Event) -> bool:
 class FleetOptions:
     cut_at: float | None = 3.0  # virtual time robot1 is cut off (None: never)
     heal_at: float | None = 7.0  # ... and healed (None: never)
-    speed: float = SPEED  # virtual seconds per wall second; 0: as fast as possible
+    speed: float = DEMO_SPEED  # virtual seconds per wall second; 0: as fast as possible
     quiet: bool = False
     view: int | None = None
     view_host: str = "127.0.0.1"
