@@ -2,6 +2,6 @@
 
 import sys
 
-from sm_bt.cli.app import main
+from sm_bt.cli import main
 
 sys.exit(main())

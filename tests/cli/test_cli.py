@@ -498,3 +498,26 @@ def test_the_managers_start_up_lines_name_the_nodes_only_when_it_serves_them() -
     assert "- node 'amcl'" in every and "  - /amcl/change_mode" in every
     assert systems == [line for line in every if line.startswith(("- system", "  - /pilot/"))]
     assert "  - /pilot/change_state" in systems
+
+
+
+#: A process whose import of the commands is interrupted by Ctrl-C (as on a busy machine, where
+#: loading them takes a second or more), then runs sm-bt.
+_INTERRUPTED_LOAD = """
+import sys
+
+class Interrupt:
+    def find_spec(self, name, path=None, target=None):
+        if name == "sm_bt.cli.app":
+            raise KeyboardInterrupt
+        return None
+
+sys.meta_path.insert(0, Interrupt())
+from sm_bt.cli import main
+sys.exit(main(["modes", "pilot"]))
+"""
+
+
+def test_ctrl_c_while_the_commands_load_ends_the_command_as_interrupted() -> None:
+    done = subprocess.run([sys.executable, "-c", _INTERRUPTED_LOAD], capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stderr) == (130, "sm-bt: interrupted\n")

@@ -12,7 +12,8 @@ import time
 from collections.abc import Callable
 
 import pytest
-from ros_processes import DUMPABLE, ManagerProcess, RosContext, Starter, communicate_or_dump, wait_until
+from ros_processes import (DUMPABLE, ManagerProcess, RosContext, Starter, communicate_or_dump, line_within,
+                           wait_until)
 from system_modes_msgs.srv import ChangeMode
 
 pytestmark = pytest.mark.ros
@@ -59,7 +60,10 @@ def test_the_monitor_stops_within_two_seconds_of_sigint(node_processes: Starter)
                                    stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                    env={**os.environ, **DUMPABLE})
         try:
-            time.sleep(2.5)  # discovering the nodes, or watching
+            # Its first line says it runs (the commands loaded, ROS up: a second or more on a busy
+            # machine; a Ctrl-C before is told apart, tests/cli): then discovering, or watching.
+            assert line_within(monitor.stdout, 30.0, "the monitor's first line"), monitor.communicate()
+            time.sleep(0.5)
             assert monitor.poll() is None, monitor.communicate()
             monitor.send_signal(signal.SIGINT)
             sent = time.monotonic()
