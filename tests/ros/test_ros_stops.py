@@ -12,8 +12,7 @@ import time
 from collections.abc import Callable
 
 import pytest
-from ros_processes import (DUMPABLE, ManagerProcess, RosContext, Starter, communicate_or_dump, line_within,
-                           wait_until)
+from ros_processes import DUMPABLE, ManagerProcess, RosContext, Starter, communicate_or_dump, line_within, wait_until
 from system_modes_msgs.srv import ChangeMode
 
 pytestmark = pytest.mark.ros
