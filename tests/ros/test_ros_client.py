@@ -313,7 +313,7 @@ def test_the_nodes_backend_refuses_a_fleets_model_and_names_the_one_that_drives_
     from sm_bt.model.remote_parts import MixedModel
     from sm_bt.ros.backend import RosBackend
 
-    fleet = Path(__file__).resolve().parents[2] / "docs" / "examples" / "fleet.yaml"
+    fleet = Path(__file__).resolve().parents[2] / "models" / "fleet.yaml"
     with pytest.raises(MixedModel, match=r"its nodes are remote parts: sm_bt.ros.remote_parts.RemoteBackend drives"):
         RosBackend(ros_context.node, load_model(fleet))
 
