@@ -14,16 +14,19 @@ For every part of the model, with the reference's names and types (a drop-in for
   target changes), ``/{system}/transition_event`` and ``/{part}/mode_event`` (when its inferred
   state or mode changes).
 
-Unlike the reference, events go out as soon as inference changes (no 1 s timer), carry their
-real start state or mode and a timestamp (ROS time, nanoseconds: when the change happened), and
-every topic is latched (transient local, depth 1). Every message is published when its change
-happens, whoever reads, so that what the topics say is true on the wire: a volatile subscriber
-gets only the changes after it subscribed, and a late transient-local one gets the current value
-first (its writer's history holds nothing older). The messages go out as CDR bytes written here
-(:mod:`sm_bt.ros.cdr`), a fraction of what building them for rclpy costs. ``change_mode`` and
-``change_state`` answer ``success`` for an *accepted* request; confirmation comes as
-``mode_event``/``transition_event`` (or through the behaviours). The same engine serves the
-behaviours of a mission tree in the same process.
+Unlike the reference, events go out as soon as inference changes (no 1 s timer), carry their real
+start state or mode and a timestamp (ROS time, nanoseconds: when the change happened), and every
+topic is latched (transient local, depth 1). ``mode_event`` alone also offers a liveliness lease
+(:data:`MODE_EVENT_LEASE`, automatic): DDS itself then tells its readers that ask for it (a
+fleet's manager, :mod:`sm_bt.ros.remote_parts`) when this process stops or is cut off, with no
+call answered by Python; readers that ask for no lease (the reference's, most clients') match as
+before. Every message is published when its change happens, whoever reads, so that what the topics
+say is true on the wire: a volatile subscriber gets only the changes after it subscribed, and a
+late transient-local one gets the current value first (its writer's history holds nothing older).
+The messages go out as CDR bytes written here (:mod:`sm_bt.ros.cdr`), a fraction of what building
+them for rclpy costs. ``change_mode`` and ``change_state`` answer ``success`` for an *accepted*
+request; confirmation comes as ``mode_event``/``transition_event`` (or through the behaviours).
+The same engine serves the behaviours of a mission tree in the same process.
 
 What goes on each topic:
 
@@ -58,8 +61,9 @@ from typing import Any
 from lifecycle_msgs.msg import State as StateMsg
 from lifecycle_msgs.msg import TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
+from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 from sm_bt_msgs.srv import HoldMode, PreviewChange, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
@@ -81,6 +85,18 @@ log = logging.getLogger("sm_bt.ros.manager_node")
 
 #: Latched: a subscriber that joins late still gets the last message.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: Seconds of the liveliness lease every part's ``mode_event`` offers. Fast DDS (rmw_fastrtps sets the
+#: announcement period to 2/3 of the lease) then asserts the process's liveliness every 1/3 s, from
+#: its own threads, to every participant of the domain: a reader that asks for a lease of L s
+#: (L >= this one to match; a fleet asks for its liveness window, 0.9 s) is told that the writer is no
+#: longer alive L s after the last assertion it received: the process stopped, exited or was cut
+#: off. Two assertions in a row may be lost within a 0.9 s lease. A reader that asks for no lease
+#: (infinite: the default QoS) matches as before.
+MODE_EVENT_LEASE = 0.5
+#: ``mode_event``'s QoS: latched, with the lease.
+MODE_EVENTS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         liveliness=LivelinessPolicy.AUTOMATIC,
+                         liveliness_lease_duration=Duration(nanoseconds=int(MODE_EVENT_LEASE * 1e9)))
 #: What a system's ``change_state`` can lead to (``get_available_states``).
 SYSTEM_STATES = (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE)
 
@@ -152,8 +168,8 @@ class ModeManagerServer:
             callback = _never_raising(f"{base}/{name}", answer, _failure_response(kind))
             self._services.append(node.create_service(kind, f"{base}/{name}", callback))
 
-        def publisher(kind: Any, name: str) -> Any:
-            created = removable.publisher(node, kind, f"{base}/{name}", LATCHED)
+        def publisher(kind: Any, name: str, qos: QoSProfile = LATCHED) -> Any:
+            created = removable.publisher(node, kind, f"{base}/{name}", qos)
             self._publishers.append(created)
             return created
 
@@ -163,7 +179,7 @@ class ModeManagerServer:
         service(PreviewChange, "preview_change", lambda req, res: self._preview_change(part, req, res))
         service(RequestChange, "request_change", lambda req, res: self._request_change(part, req, res))
         service(HoldMode, "hold_mode", lambda req, res: self._hold_mode(part, req, res))
-        self._mode_events[part] = publisher(ModeEvent, "mode_event")
+        self._mode_events[part] = publisher(ModeEvent, "mode_event", MODE_EVENTS)
         self._mode_requests[part] = publisher(ModeEvent, "mode_request_info")
         self._transition_requests[part] = publisher(TransitionEvent, "transition_request_info")
         if system:

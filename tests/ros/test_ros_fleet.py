@@ -15,6 +15,7 @@ from lifecycle_msgs.srv import GetState
 from ros_processes import ManagerProcess, RosContext, Starter, wait_until
 from system_modes_msgs.srv import ChangeMode, GetMode
 
+from sm_bt.engine.events import EventKind
 from sm_bt.model import load_model
 from sm_bt.model.states import State
 from sm_bt.ros.runtime import RosRuntime
@@ -27,6 +28,8 @@ FLEET = Path(__file__).resolve().parents[2] / "models" / "fleet.yaml"
 #: The fleet's liveness window (RemoteBackend's default), and what the verdict
 #: may take beyond them on a loaded machine.
 WINDOW, LATENCY = 0.9, 0.3
+#: RemoteBackend's default pace of the probes of a robot whose liveliness DDS vouches for.
+SLOW_PROBES = 3.0
 #: lifecycle_msgs/msg/State's id.
 INACTIVE = 2
 
@@ -62,7 +65,17 @@ def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
     assert fleet_manager.actual("robot2").state is State.INACTIVE
     assert str(fleet_manager.actual("fleet")) == "active.NIGHT"
 
-    # Robot1's manager stops answering (frozen): unknown at the fleet within the window.
+    # DDS vouches for the robots' managers: their probes are seconds apart, and their silence between
+    # them is no verdict.
+    views: list[str] = []
+    with fleet_manager.lock:
+        watch = fleet_manager.subscribe(lambda event: views.append(str(event.actual)), part="robot1",
+                                        kinds=[EventKind.ACTUAL])
+    time.sleep(SLOW_PROBES + 2 * WINDOW)
+    watch.cancel()
+    assert views == [] and str(fleet_manager.actual("robot1")) == "active.f_energy_saving_mode", views
+
+    # Robot1's manager stops answering (frozen, its DDS threads too): unknown at the fleet within the window.
     robot1 = managers["robot1"].process
     assert robot1 is not None
     os.kill(robot1.pid, signal.SIGSTOP)
@@ -70,7 +83,7 @@ def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
         stopped = time.monotonic()
         wait_until(lambda: fleet_manager.actual("robot1").state is State.UNKNOWN, 5.0, "robot1 never unknown")
         took = time.monotonic() - stopped
-        # One window after its last answer, which came at most a probe interval before the freeze.
+        # One window after its last word: its liveliness, asserted by DDS every 1/3 s, tells it.
         assert took <= WINDOW + LATENCY, f"robot1 unknown {took:.2f} s after its manager froze"
         assert "no answer from the manager of robot1 (/robot1/pilot)" in fleet_manager.observation("robot1").gone
         assert fleet_manager.actual("robot2").state is State.INACTIVE

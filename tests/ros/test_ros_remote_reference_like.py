@@ -7,10 +7,16 @@ system activates it in that mode; it answers ``success`` at once and reports lat
 sends no event at all. Against it, the fleet (sm_bt.ros.remote_parts) must ask for the right
 things in the right order and learn where the robot is without the events. The real reference is
 driven in ``make interop`` (tests/interop/interop_fleet.py).
+
+As the reference, it offers no liveliness lease on ``mode_event``, and the fleet asks it for none
+(it probes such a robot at the fast pace). Where it plays sm-bt manager (``served_by`` left out) it
+offers sm-bt manager's lease; offering none there, it is an older sm-bt manager: told as a warning,
+probed at the fast pace, its events still heard.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Iterator
@@ -19,12 +25,15 @@ from pathlib import Path
 import pytest
 from lifecycle_msgs.msg import TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.duration import Duration
+from rclpy.qos import LivelinessPolicy, QoSProfile
 from ros_processes import RosContext, wait_until
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetMode
 
 from sm_bt.model import load_model
 from sm_bt.model.states import State
+from sm_bt.ros.manager_node import MODE_EVENT_LEASE
 from sm_bt.ros.runtime import RosRuntime
 
 pytestmark = pytest.mark.ros
@@ -52,21 +61,27 @@ robot1:
 DELAY = 0.1
 #: Long enough for the fleet to have read and probed the robot several times.
 SETTLE = 1.5
+#: The mode_event writer of sm-bt manager's part: the lease it offers (its other QoS do not matter here).
+LEASED = QoSProfile(depth=10, liveliness=LivelinessPolicy.AUTOMATIC,
+                    liveliness_lease_duration=Duration(nanoseconds=round(MODE_EVENT_LEASE * 1e9)))
 
 
 class ScriptedManager:
-    """``/robot1/pilot`` served as the reference serves it; ``requests`` lists what it was asked."""
+    """``/robot1/pilot`` served as the reference serves it; ``requests`` lists what it was asked.
+    ``lease``: its ``mode_event`` offers sm-bt manager's liveliness lease (the reference offers none)."""
 
-    def __init__(self, ros: RosContext) -> None:
+    def __init__(self, ros: RosContext, *, lease: bool = False) -> None:
         node = ros.node
         self.state, self.mode = State.UNKNOWN, "unknown"
         self.requests: list[str] = []
         self.events = True  # publish events for its moves (the reference sometimes does not)
         self.sm_bt_switch = False  # switch an active system as sm-bt manager tells it (switch_as_sm_bt)
+        self.running = threading.Event()  # cleared: its Python hangs (in the next get_state it answers)
+        self.running.set()
         self._lock = threading.Lock()
         prefix = "/robot1/pilot"
         self._transition_events = node.create_publisher(TransitionEvent, f"{prefix}/transition_event", 10)
-        self._mode_events = node.create_publisher(ModeEvent, f"{prefix}/mode_event", 10)
+        self._mode_events = node.create_publisher(ModeEvent, f"{prefix}/mode_event", LEASED if lease else 10)
         self._services = [
             node.create_service(GetState, f"{prefix}/get_state", self._get_state),
             node.create_service(GetMode, f"{prefix}/get_mode", self._get_mode),
@@ -91,6 +106,7 @@ class ScriptedManager:
         threading.Timer(DELAY, self.move, (state, mode)).start()
 
     def _get_state(self, request: GetState.Request, response: GetState.Response) -> GetState.Response:
+        self.running.wait(30.0)  # hung: the executor thread of its node waits here, DDS's threads go on
         with self._lock:
             response.current_state.id = int(self.state.value)
         return response
@@ -146,10 +162,24 @@ def scripted(ros_context: RosContext) -> ScriptedManager:
     return ScriptedManager(ros_context)
 
 
-def _fleet(tmp_path: Path, extra: str = "    served_by: reference\n") -> RosRuntime:
+@pytest.fixture
+def scripted_sm_bt(ros_context: RosContext) -> ScriptedManager:
+    """It plays sm-bt manager: its mode_event offers sm-bt manager's lease."""
+    return ScriptedManager(ros_context, lease=True)
+
+
+def _leases_asked(ros: RosContext, topic: str) -> list[float]:
+    """The finite liveliness leases (s) the readers of ``topic`` ask for, as the graph shows them."""
+    return [info.qos_profile.liveliness_lease_duration.nanoseconds / 1e9
+            for info in ros.node.get_subscriptions_info_by_topic(topic)
+            if info.qos_profile.liveliness_lease_duration.nanoseconds < 10 ** 18]
+
+
+def _fleet(tmp_path: Path, extra: str = "    served_by: reference\n", **backend: float) -> RosRuntime:
     path = tmp_path / "fleet.yaml"
     path.write_text(FLEET.format(extra=extra), encoding="utf-8")
-    return RosRuntime(load_model(path), node_name="fleet_manager", manager_options={"request_timeout": 10.0})
+    return RosRuntime(load_model(path), node_name="fleet_manager", manager_options={"request_timeout": 10.0},
+                      backend_options=backend)
 
 
 @pytest.fixture
@@ -166,11 +196,13 @@ def _done(runtime: RosRuntime, mode: str) -> None:
 
 
 def test_a_robot_its_manager_knows_nothing_of_is_taken_for_unconfigured_and_brought_up_configure_then_mode(
-        scripted: ScriptedManager, fleet: RosRuntime) -> None:
+        scripted: ScriptedManager, fleet: RosRuntime, ros_context: RosContext) -> None:
     manager = fleet.manager
     wait_until(lambda: manager.actual("robot1").state is State.UNCONFIGURED, 10.0, "robot1 never taken in")
     time.sleep(SETTLE)  # its manager goes on answering unknown: that is no loss of the robot
     assert manager.actual("robot1").state is State.UNCONFIGURED
+    # The reference offers no lease: asked for one, its mode_event would not reach the fleet.
+    assert _leases_asked(ros_context, "/robot1/pilot/mode_event") == []
     _done(fleet, "__DEFAULT__")
     # Configure by id, then activation as the mode: never the reference's activate (its __DEFAULT__).
     assert scripted.requests == ["change_state 1", "change_mode f_normal_mode"]
@@ -184,9 +216,13 @@ def test_a_robot_its_manager_knows_nothing_of_is_taken_for_unconfigured_and_brou
 
 
 def test_served_by_sm_bt_a_robot_its_manager_knows_nothing_of_stays_out_of_reach(
-        scripted: ScriptedManager, tmp_path: Path) -> None:
+        scripted_sm_bt: ScriptedManager, tmp_path: Path, ros_context: RosContext) -> None:
+    scripted = scripted_sm_bt
     runtime = _fleet(tmp_path, extra="")
     try:
+        # Served by sm-bt manager: the fleet asks for a lease of its liveness window.
+        wait_until(lambda: _leases_asked(ros_context, "/robot1/pilot/mode_event") == [0.9], 10.0,
+                   f"no lease asked: {_leases_asked(ros_context, '/robot1/pilot/mode_event')}")
         time.sleep(SETTLE + 1.0)
         assert not runtime.manager.observation("robot1").seen
         assert scripted.requests == []
@@ -216,7 +252,8 @@ def test_without_events_the_fleet_learns_a_robots_moves_from_its_answers(
 
 
 def test_a_switch_whose_mode_event_overtakes_its_end_is_never_seen_back_in_the_old_mode(
-        scripted: ScriptedManager, tmp_path: Path) -> None:
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    scripted = scripted_sm_bt
     scripted.move(State.ACTIVE, "f_normal_mode")
     scripted.sm_bt_switch = True
     runtime = _fleet(tmp_path, extra="")
@@ -243,5 +280,59 @@ def test_a_switch_whose_mode_event_overtakes_its_end_is_never_seen_back_in_the_o
             watcher.join(5.0)
         assert seen[0] == "active.f_normal_mode" and seen[-1] == "active.f_performance_mode", seen
         assert "active.f_normal_mode" not in seen[1:], seen
+    finally:
+        runtime.close()
+
+
+def test_served_by_sm_bt_a_manager_that_offers_no_lease_is_probed_at_the_fast_pace_and_heard(
+        scripted: ScriptedManager, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """An older sm-bt manager: its mode_event offers no lease, so the fleet's liveliness reader does
+    not match it. Told as a warning; its events still come (they have a reader of their own), and
+    its probes keep the fast pace (a silent move is seen within a second, not at a slow probe's)."""
+    caplog.set_level(logging.WARNING, logger="sm_bt.ros.remote_parts")
+    scripted.move(State.ACTIVE, "f_normal_mode")
+    runtime = _fleet(tmp_path, extra="")
+    try:
+        manager = runtime.manager
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+        wait_until(lambda: "offers no liveliness lease" in caplog.text, 10.0, "no warning of the missing lease")
+        scripted.move(State.ACTIVE, "f_performance_mode")  # told by its mode_event
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_performance_mode", 3.0, "its event unheard")
+        scripted.events = False
+        for state in (State.INACTIVE, State.ACTIVE, State.INACTIVE):  # told by nothing: each by the next probe
+            scripted.move(state, "f_normal_mode" if state is State.ACTIVE else "")
+            took = wait_until(lambda state=state: manager.actual("robot1").state is state, 5.0,
+                              f"the silent move to {state.label} never seen")
+            assert took <= 1.0, f"the silent move to {state.label} seen after {took:.2f} s: probed at the slow pace"
+    finally:
+        runtime.close()
+
+
+def test_served_by_sm_bt_a_manager_hung_while_its_dds_threads_live_is_told_by_its_slow_probes(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    """Its liveliness goes on (DDS's threads assert it), so only a probe can tell: one left unanswered
+    for the window is asked again at once, and a fast probe interval later it is out of reach. Then
+    it answers again, and is read afresh."""
+    scripted = scripted_sm_bt
+    scripted.move(State.ACTIVE, "f_normal_mode")
+    slow = 1.0  # the slow probes' pace (3 s by default), short for the test
+    runtime = _fleet(tmp_path, extra="", slow_probe_interval=slow)
+    try:
+        manager = runtime.manager
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+        time.sleep(SETTLE)
+        assert str(manager.actual("robot1")) == "active.f_normal_mode"
+        scripted.running.clear()
+        hung = time.monotonic()
+        try:
+            # The next slow probe, its window, the one asked again, a fast interval (and the report).
+            took = wait_until(lambda: manager.actual("robot1").state is State.UNKNOWN, 10.0, "robot1 never unknown")
+            assert took <= slow + 0.9 + 0.3 + 0.5, f"robot1 unknown {time.monotonic() - hung:.2f} s after it hung"
+            assert manager.observation("robot1").gone == (
+                "no answer from the manager of robot1 (/robot1/pilot) for 0.9 s, though DDS still sees its process "
+                "(it hangs?)")
+        finally:
+            scripted.running.set()
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 5.0, "robot1 never read again")
     finally:
         runtime.close()
