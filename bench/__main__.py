@@ -18,8 +18,9 @@ from bench.report import plot, table, write_json
 
 #: In the order they run: the cheap, deterministic ones first, the real-ROS one last.
 MODULES = ("scale", "memory", "model_load", "large", "tick", "analysis", "ros", "ros_app", "cli")
-#: Run only when named (``--only``): 200 real nodes in ten processes take 3-4 minutes on their own.
-OPTIONAL = ("ros_plant",)
+#: Run only when named (``--only``): 200 real nodes in ten processes take 3-4 minutes on their own;
+#: a fleet of 10 robots (20 processes) about as long.
+OPTIONAL = ("ros_plant", "ros_fleet")
 
 
 def _one_line(error: BaseException) -> str:
