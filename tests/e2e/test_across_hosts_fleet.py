@@ -11,29 +11,13 @@ import time
 from pathlib import Path
 
 import pytest
+from fleet_partitions import FLEET
 from hosts import Hosts, two_hosts_fixture  # noqa: F401
 from ros_processes import Starved, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.netns]
 
-FLEET = """\
-fleet:
-  ros__parameters:
-    type: system
-    modes:
-      __DEFAULT__:
-        robot1: active
-      NIGHT:
-        robot1: active.f_energy_saving_mode
-
-robot1:
-  ros__parameters:
-    type: remote
-    manager: /robot1
-    system: pilot
-    modes: [__DEFAULT__, f_energy_saving_mode]
-"""
-#: The issue's goals: unknown at the fleet within 1 s of its manager's last answer (which came at
+#: The goals (README, "Fleets"): unknown at the fleet within 1 s of its manager's last answer (which came at
 #: most a probe interval, 0.3 s, before the cut: so within 1 s of the cut is the stricter test), and
 #: consistent within 2 s of the heal.
 TOLD, CONSISTENT = 1.0, 2.0
