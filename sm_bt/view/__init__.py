@@ -59,8 +59,8 @@ class View:
         """The run is over (:meth:`finish`): ``say`` so with the address, then serve the page until
         Ctrl-C."""
         self.finish()
-        say(f"run over; the view stays at {self.url} until Ctrl-C")
-        with contextlib.suppress(KeyboardInterrupt):
+        with contextlib.suppress(KeyboardInterrupt):  # from the moment it says so (a fresh-clone run's
+            say(f"run over; the view stays at {self.url} until Ctrl-C")  # Ctrl-C came in between)
             while True:
                 time.sleep(3600)
 
