@@ -27,7 +27,7 @@ from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
 from model_files import bundled
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_harness import BACKEND_OPTIONS, RosHarness
-from ros_processes import NodeProcess, RosContext, Starter, call, wait_until
+from ros_processes import NodeProcess, RosContext, Starter, call, line_within, wait_until
 from sm_bt_msgs.srv import HoldMode, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
@@ -338,11 +338,16 @@ def test_a_plain_client_changes_the_mode_of_actuation_and_sees_mode_event(
 
 
 def test_the_manager_node_is_a_clean_ros_process(manager_process: subprocess.Popen[str]) -> None:
-    time.sleep(1.0)
+    # Serving first (on a loaded machine its start takes seconds: a SIGINT during Python's own
+    # imports ends any Python program by the signal), then a moment of running.
+    out = ""
+    while "serving 1 system(s) and 2 node(s)" not in out:
+        line = line_within(manager_process.stdout, 30.0, "sm-bt manager: its serving line")
+        assert line, f"sm-bt manager ended before serving: {out}"
+        out += line
+    time.sleep(0.5)
     manager_process.send_signal(signal.SIGINT)
     assert manager_process.wait(5.0) == 0
-    out = manager_process.stdout.read() if manager_process.stdout else ""
-    assert "serving 1 system(s) and 2 node(s)" in out
 
 
 def test_the_runtime_reports_a_node_appearing_late(node_processes: Starter) -> None:
@@ -384,7 +389,7 @@ def test_requests_through_the_interface_come_from_the_operator_and_respect_holds
     wait_until(lambda: str(manager.actual("pilot")) == "active.f_performance_mode", 10.0, "the queued change")
     rule = manager.hold("pilot", "f_degraded_mode", requester="rule")
     settle(pilot, rule.request)
-    code = main(["mode", "set", "pilot", "f_slow_mode", "--timeout", "5"])  # the operator's shell
+    code = main(["mode", "set", "pilot", "f_slow_mode", "--timeout", "15"])  # the operator's shell
     err = capsys.readouterr().err
     assert code == 1 and err.startswith("sm-bt: error: the manager refused mode 'f_slow_mode' for pilot: pilot is "
                                         "held in active.f_degraded_mode by rule (priority 100)"), err
