@@ -37,6 +37,7 @@ from typing import Any
 from bench.figures import Figure
 from bench.ros import P1_GOAL, model_text
 from bench.ros_baseline import SYSTEM, TIMEOUT, freeze_garbage, mode_values
+from bench.ros_baseline import confirmed as confirmed_request
 
 #: Per round and side on a full run: switches, bring-ups of each kind; rounds. ``--quick`` takes a few.
 SWITCHES, BRING_UPS, ROUNDS = 20, 8, 6
@@ -55,23 +56,7 @@ def _manager_times(model: Any, names: Sequence[str], switches: int, bring_ups: i
         freeze_garbage()  # as sm-bt manager does once it is up
 
         def confirmed(start: Callable[[], Any]) -> float:
-            ended: list[float] = []
-            done = threading.Event()
-
-            def finished(_request: Any) -> None:
-                ended.append(time.perf_counter())
-                done.set()
-
-            # Under the manager's lock: the request cannot end between its start and the registration.
-            with manager.lock:
-                began = time.perf_counter()
-                request = start()
-                request.add_done_callback(finished)
-            if not done.wait(TIMEOUT):
-                raise RuntimeError(f"{request.description} not done in {TIMEOUT:g} s: {request.feedback}")
-            if not request.succeeded:
-                raise RuntimeError(f"{request.description} failed: {request.reason}")
-            return ended[0] - began
+            return confirmed_request(manager, start)
 
         def reset() -> None:  # active to unconfigured, untimed
             confirmed(lambda: manager.change_state(SYSTEM, "deactivate"))

@@ -304,6 +304,28 @@ def wait_for(condition: Callable[[], bool], what: str, limit: float = TIMEOUT) -
     return time.perf_counter() - began
 
 
+def confirmed(manager: Any, start: Callable[[], Any], limit: float = TIMEOUT) -> float:
+    """Seconds from making a request of ``manager`` (``start()``) to its done callback; it must
+    succeed within ``limit`` s (``RuntimeError`` otherwise)."""
+    ended: list[float] = []
+    done = threading.Event()
+
+    def finished(_request: Any) -> None:
+        ended.append(time.perf_counter())
+        done.set()
+
+    # Under the manager's lock: the request cannot end between its start and the registration.
+    with manager.lock:
+        began = time.perf_counter()
+        request = start()
+        request.add_done_callback(finished)
+    if not done.wait(limit):
+        raise RuntimeError(f"{request.description} not done in {limit:g} s: {request.feedback}")
+    if not request.succeeded:
+        raise RuntimeError(f"{request.description} failed: {request.reason}")
+    return ended[0] - began
+
+
 def freeze_garbage() -> None:
     """Keep what the process has made so far out of the garbage collector's passes (``gc.freeze()``):
     a full pass over a ROS process's objects takes 20-50 ms here, and lands on a measurement."""

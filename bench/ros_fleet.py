@@ -44,7 +44,7 @@ from typing import IO, Any
 
 from bench.figures import Figure
 from bench.ros import _cpu_seconds
-from bench.ros_baseline import freeze_garbage
+from bench.ros_baseline import confirmed, freeze_garbage
 from sm_bt.model.states import State
 from sm_bt.ros.node_process import NodesError, NodesProcess
 
@@ -320,23 +320,7 @@ def _fleet_runtime(model: Any, robots: Sequence[str]) -> Any:
 
 def _confirmed(manager: Any, start: Callable[[], Any]) -> float:
     """Seconds from making a request of the fleet's manager to its done callback; it must succeed."""
-    ended: list[float] = []
-    done = threading.Event()
-
-    def finished(_request: Any) -> None:
-        ended.append(time.perf_counter())
-        done.set()
-
-    # Under the manager's lock: the request cannot end between its start and the registration.
-    with manager.lock:
-        began = time.perf_counter()
-        request = start()
-        request.add_done_callback(finished)
-    if not done.wait(TIMEOUT + 5.0):
-        raise RuntimeError(f"{request.description} not done in {TIMEOUT + 5.0:g} s: {request.feedback}")
-    if not request.succeeded:
-        raise RuntimeError(f"{request.description} failed: {request.reason}")
-    return ended[0] - began
+    return confirmed(manager, start, TIMEOUT + 5.0)
 
 
 def _fleet_block(model: Any, robots: Sequence[str], at: str, switches: int) -> tuple[list[float], str, float]:
