@@ -306,9 +306,7 @@ class RemoteBackend:
             if silent:
                 robot.present = False
         if silent:
-            self._report(lambda listener: listener.node_vanished(
-                robot.part, f"no answer from the manager of {robot.part} ({robot.fqn}) for "
-                            f"{self.liveness_timeout:g} s (it exited, or the network is cut)"))
+            self._unanswered(robot, "it exited, or the network is cut")
 
     def _lively(self, robot: _Robot, info: Any) -> None:
         """(The liveliness thread.) DDS's word on its manager's lease (``info``: a
@@ -361,9 +359,12 @@ class RemoteBackend:
             if hung:
                 robot.present = False
         if hung:
-            self._report(lambda listener: listener.node_vanished(
-                robot.part, f"no answer from the manager of {robot.part} ({robot.fqn}) for "
-                            f"{self.liveness_timeout:g} s, though DDS still sees its process (it hangs?)"))
+            self._unanswered(robot, "DDS still sees its process: it hangs?")
+
+    def _unanswered(self, robot: _Robot, why: str) -> None:
+        self._report(lambda listener: listener.node_vanished(
+            robot.part, f"no answer from the manager of {robot.part} ({robot.fqn}) for {self.liveness_timeout:g} s "
+                        f"({why})"))
 
     def _state_answer(self, robot: _Robot, state: State, events: int) -> None:
         with self._lock:

@@ -329,8 +329,8 @@ def test_served_by_sm_bt_a_manager_hung_while_its_dds_threads_live_is_told_by_it
             took = wait_until(lambda: manager.actual("robot1").state is State.UNKNOWN, 10.0, "robot1 never unknown")
             assert took <= slow + 0.9 + 0.3 + 0.5, f"robot1 unknown {time.monotonic() - hung:.2f} s after it hung"
             assert manager.observation("robot1").gone == (
-                "no answer from the manager of robot1 (/robot1/pilot) for 0.9 s, though DDS still sees its process "
-                "(it hangs?)")
+                "no answer from the manager of robot1 (/robot1/pilot) for 0.9 s (DDS still sees its process: it "
+                "hangs?)")
         finally:
             scripted.running.set()
         wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 5.0, "robot1 never read again")
