@@ -249,7 +249,7 @@ class NodeDriver:
 
     def _send_parameters(self, owner: Owner, mode: NodeMode) -> None:
         values = mode.values()
-        call = _DriverCall(self, f"set parameters of mode {mode.name}", self.io.now(), owner, mode=mode.name)
+        call = _DriverCall(self, mode.set_label, self.io.now(), owner, mode=mode.name)
         self.call = call
         self._sets += 1
         self.io.send_parameters(self.node, values, call.answered)

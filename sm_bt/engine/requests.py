@@ -86,6 +86,15 @@ class Request:
         return self._progress() if self._progress is not None else "queued"
 
     @property
+    def outcome(self) -> str:
+        """In a word: ``running``, ``succeeded``, ``failed`` or ``refused``."""
+        if not self.done:
+            return "running"
+        if self.refused:
+            return "refused"
+        return "succeeded" if self.succeeded else "failed"
+
+    @property
     def elapsed(self) -> float | None:
         return None if self.finished is None else self.finished - self.created
 

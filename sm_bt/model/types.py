@@ -32,6 +32,8 @@ DONT_CARE = "__DONTCARE__"
 #: The one parameter of a remote part: to the engine a remote part is a node whose parameter is the
 #: mode its manager reports, and whose modes each set it to their name (sm_bt.model.remote_parts).
 REMOTE_MODE = "__mode__"
+#: Who a fleet's requests come from, to the manager of a remote part (its holds and log name it).
+FLEET_REQUESTER = "fleet"
 #: The managers a remote part may be served by (``served_by``, :class:`Remote`); the first is the default.
 REMOTE_MANAGERS = ("sm_bt", "reference")
 
@@ -144,7 +146,10 @@ class NodeMode:
 
     @functools.cached_property
     def set_label(self) -> str:
-        """How a preview names the call that sets this mode's parameters."""
+        """How a preview and a request's feedback name the call that sets this mode's parameters (of
+        a remote part: the mode asked of its manager)."""
+        if set(self.parameters) == {REMOTE_MODE}:
+            return f"change_mode {self.name}"
         return f"set parameters of mode {self.name}"
 
     def values(self) -> dict[str, ParamValue]:

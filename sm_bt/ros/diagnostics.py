@@ -130,22 +130,12 @@ class PartDiagnostic:
         return dict(self.values)[key]
 
 
-def request_outcome(request: Request | None) -> str:
-    if request is None:
-        return ""
-    if not request.done:
-        return "running"
-    if request.refused:
-        return "refused"
-    return "succeeded" if request.succeeded else "failed"
-
-
 def part_diagnostic(manager: ModeManager, part: str, last: Request | None, link: Any = None) -> PartDiagnostic:
     """The status of ``part`` now (call with the manager's lock held); ``last``: its last request,
     ``link``: for a node, how it answers (:class:`sm_bt.ros.backend.Link`), if known."""
     status = manager.status(part)
     actual, target, divergence = status.actual, status.target, status.divergence
-    outcome = request_outcome(last)
+    outcome = last.outcome if last is not None else ""
     values: list[tuple[str, str]] = [
         ("target", str(target) if target is not None else ""),
         ("actual", str(actual)),

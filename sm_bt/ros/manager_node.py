@@ -12,7 +12,12 @@ For every part of the model, with the reference's names and types (a drop-in for
   (sm_bt_msgs/HoldMode): a hold with a lease, renewed and released by its number (``sm-bt mode hold``);
 * topics ``/{part}/mode_request_info`` and ``/{part}/transition_request_info`` (when a part's
   target changes), ``/{system}/transition_event`` and ``/{part}/mode_event`` (when its inferred
-  state or mode changes).
+  state or mode changes);
+* sm_bt's own topic ``/{part}/request_outcome`` (sm_bt_msgs/RequestOutcome, reliable, volatile,
+  depth 10): how each request made through this interface ended (succeeded, failed with the
+  reason, or refused), with its number, once, when it ends. A client that waits for its request
+  (a fleet's manager, :mod:`sm_bt.ros.remote_parts`) learns of its failure at once, rather than
+  at its own timeout.
 
 Unlike the reference, events go out as soon as inference changes (no 1 s timer), carry their real
 start state or mode and a timestamp (ROS time, nanoseconds: when the change happened), and every
@@ -64,6 +69,7 @@ from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetState
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
+from sm_bt_msgs.msg import RequestOutcome
 from sm_bt_msgs.srv import HoldMode, PreviewChange, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetAvailableModes, GetMode
@@ -97,6 +103,9 @@ MODE_EVENT_LEASE = 0.5
 MODE_EVENTS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                          liveliness=LivelinessPolicy.AUTOMATIC,
                          liveliness_lease_duration=Duration(nanoseconds=int(MODE_EVENT_LEASE * 1e9)))
+#: ``request_outcome``'s QoS: every outcome to the readers there (a burst of a preempted request and its
+#: successor's refusal included); none to a reader that comes later, whose requests are newer.
+OUTCOMES = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 #: What a system's ``change_state`` can lead to (``get_available_states``).
 SYSTEM_STATES = (State.UNCONFIGURED, State.INACTIVE, State.ACTIVE)
 
@@ -129,6 +138,7 @@ class ModeManagerServer:
         self._transition_events: dict[str, Any] = {}
         self._mode_requests: dict[str, Any] = {}
         self._transition_requests: dict[str, Any] = {}
+        self._outcomes: dict[str, Any] = {}
         self._holds: dict[int, Hold] = {}  # made through hold_mode, by number (ended ones dropped on the next call)
         self._holds_lock = threading.Lock()
         self._clock: Any = node.get_clock()  # a ROSClock
@@ -151,6 +161,7 @@ class ModeManagerServer:
         if self._subscription is not None:
             self._subscription.cancel()
             self._subscription = None
+        self._outcomes.clear()  # a request that ends from now on is told nowhere
         for service in self._services:
             self._node.destroy_service(service)
         for publisher in self._publishers:
@@ -182,6 +193,7 @@ class ModeManagerServer:
         self._mode_events[part] = publisher(ModeEvent, "mode_event", MODE_EVENTS)
         self._mode_requests[part] = publisher(ModeEvent, "mode_request_info")
         self._transition_requests[part] = publisher(TransitionEvent, "transition_request_info")
+        self._outcomes[part] = publisher(RequestOutcome, "request_outcome", OUTCOMES)
         if system:
             service(ChangeState, "change_state", lambda req, res: self._change_state(part, req, res))
             service(GetState, "get_state", lambda req, res: self._get_state(part, res))
@@ -302,6 +314,18 @@ class ModeManagerServer:
     def _told(self, part: str, handle: Request) -> None:
         if self._on_request is not None:
             self._on_request(part, handle)
+        handle.add_done_callback(lambda ended: self._publish_outcome(part, ended))
+
+    def _publish_outcome(self, part: str, request: Request) -> None:
+        publisher = self._outcomes.get(part)
+        if publisher is None:  # closed
+            return
+        message = RequestOutcome(request=request.id, description=request.description, requester=request.requester,
+                                 outcome=request.outcome, reason=request.reason)
+        try:
+            publisher.publish(message)
+        except Exception:  # destroyed meanwhile by close(), from another thread
+            log.debug("request #%d of %s ended after the interface was closed", request.id, part)
 
     def _get_mode(self, part: str, response: Any) -> Any:
         response.current_mode = _mode_label(self._manager.actual(part))

@@ -30,7 +30,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.engine.requests import Request
 from sm_bt.model.errors import Error
 from sm_bt.model.states import State
-from sm_bt.model.types import REMOTE_MODE, Model, ParamValue
+from sm_bt.model.types import FLEET_REQUESTER, REMOTE_MODE, Model, ParamValue
 from sm_bt.sim.backend import SimBackend
 from sm_bt.sim.system import BACKEND_OPTIONS, SimulatedSystem, as_model
 
@@ -92,14 +92,15 @@ class RemoteManagers:
         self._listener = None
 
     def change_state(self, node: str, transition: Transition, done: Done) -> None:
-        self._ask(node, lambda manager, system: manager.change_state(system, transition), done)
+        self._ask(node, lambda manager, system: manager.change_state(system, transition, requester=FLEET_REQUESTER),
+                  done)
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         mode = parameters.get(REMOTE_MODE)
         if not isinstance(mode, str) or set(parameters) != {REMOTE_MODE}:
             self._later(lambda: done(CallResult(False, f"{node} is a remote part: only its mode can be asked")))
             return
-        self._ask(node, lambda manager, system: manager.change_mode(system, mode), done)
+        self._ask(node, lambda manager, system: manager.change_mode(system, mode, requester=FLEET_REQUESTER), done)
 
     # -- faults ---------------------------------------------------------------------------------------
 

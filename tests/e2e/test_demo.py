@@ -225,13 +225,13 @@ def test_the_demo_piped_to_a_file_is_plain_unwrapped_text(tmp_path: Path) -> Non
 #: end of the shift (request numbers left out: they count every request of the process).
 FLEET_STORY = (
     "fleet -> change_mode fleet __DEFAULT__ started [tree]",
-    "robot1's manager -> change_mode pilot __DEFAULT__ started",
+    "robot1's manager -> change_mode pilot __DEFAULT__ started [fleet]",
     "fleet <- change_mode fleet __DEFAULT__ succeeded",
     "robot1 is cut off from the fleet (its own manager and nodes go on)",
     "fleet ~~ robot1: target active.__DEFAULT__, actual unknown (fault: no answer from the manager of robot1",
     "fleet !! rule robot1_lost: robot1 is unknown -> active.NIGHT",
     "robot1 is reachable again",
-    "robot1's manager -> change_mode pilot f_energy_saving_mode started",
+    "robot1's manager -> change_mode pilot f_energy_saving_mode started [fleet]",
     "fleet ~~ robot1 is back on target active.f_energy_saving_mode",
     "fleet -> change_state fleet deactivate started [tree]",
     "shift SUCCESS",

@@ -168,7 +168,7 @@ def check_preview_is_the_truth(model: Model, start: dict[str, Any], part: str, k
         assert isinstance(node, NodePart)
         # A set is told by its values: two modes of a node may hold the same ones.
         wanted = [f"set parameters {sorted(node.modes[call.rsplit(' ', 1)[1]].values().items())}"
-                  if call.startswith("set parameters of mode ") else call for call in step.calls]
+                  if call.startswith(("set parameters of mode ", "change_mode ")) else call for call in step.calls]
         assert [label for _, label in executed.get(step.node, [])] == wanted, (step, executed)
     assert set(executed) <= {step.node for step in preview.steps if step.calls}
     # Stage order: every call of an earlier stage of a system before any call of a later one.

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 from lifecycle_msgs.srv import GetState
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from ros_processes import ManagerProcess, RosContext, Starter, wait_until
 from system_modes_msgs.srv import ChangeMode, GetMode
 
@@ -125,3 +127,33 @@ def test_sm_bt_manager_of_a_fleet_model_serves_the_fleet_over_the_robots_manager
     wait_until(lambda: mode_of("fleet") == "NIGHT", 20.0, "the fleet never reached NIGHT")
     assert mode_of("robot1/pilot") == "f_energy_saving_mode"
     assert state_of("robot2/pilot") == INACTIVE
+
+
+def test_a_robots_failed_request_fails_the_fleets_at_once_with_the_robots_reason(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
+        fleet: RosRuntime) -> None:
+    """robot1's amcl fails its activation: robot1's own request fails, and the fleet's with it, its
+    reason the robot's, long before the fleet's request timeout (20 s). The robot's log names the
+    fleet as the requester."""
+    managers = {name: start_manager("--namespace", f"/{name}") for name in ("robot1", "robot2")}
+    for name in managers:
+        node_processes("pilot", "--namespace", f"/{name}", "--state", "inactive")
+    for manager in managers.values():
+        manager.ready()
+    fleet_manager = fleet.manager
+    wait_until(lambda: all(fleet_manager.actual(r).state is State.INACTIVE for r in managers), 20.0,
+               "the fleet never read its robots")
+    parameter = Parameter(name="sim.fail_next", value=ParameterValue(type=ParameterType.PARAMETER_STRING,
+                                                                      string_value="activate"))
+    answer = ros_context.call(SetParameters, "/robot1/amcl/set_parameters", SetParameters.Request(
+        parameters=[parameter]), 5.0)
+    assert answer.results[0].successful, answer.results[0].reason
+    start = time.monotonic()
+    night = fleet_manager.change_mode("fleet", "NIGHT")
+    wait_until(lambda: night.done, 20.0, "the fleet's switch did not end")
+    took = time.monotonic() - start
+    assert not night.succeeded
+    assert "robot1: activate failed: its manager's request #" in night.reason, night.reason
+    assert "amcl: activate failed" in night.reason, night.reason
+    assert took < 10.0, f"the fleet's request failed {took:.1f} s after it was made"
+    assert "change_mode pilot f_energy_saving_mode started [fleet]" in managers["robot1"].stderr

@@ -10,8 +10,9 @@ driven in ``make interop`` (tests/interop/interop_fleet.py).
 
 As the reference, it offers no liveliness lease on ``mode_event``, and the fleet asks it for none
 (it probes such a robot at the fast pace). Where it plays sm-bt manager (``served_by`` left out) it
-offers sm-bt manager's lease; offering none there, it is an older sm-bt manager: told as a warning,
-probed at the fast pace, its events still heard.
+offers sm-bt manager's lease, serves its ``request_change`` and tells each request's end on
+``request_outcome``, as scripted (failed, never, before its answer); offering no lease there, it
+is an older sm-bt manager: told as a warning, probed at the fast pace, its events still heard.
 """
 
 from __future__ import annotations
@@ -28,12 +29,14 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.duration import Duration
 from rclpy.qos import LivelinessPolicy, QoSProfile
 from ros_processes import RosContext, wait_until
+from sm_bt_msgs.msg import RequestOutcome
+from sm_bt_msgs.srv import RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetMode
 
 from sm_bt.model import load_model
 from sm_bt.model.states import State
-from sm_bt.ros.manager_node import MODE_EVENT_LEASE
+from sm_bt.ros.manager_node import MODE_EVENT_LEASE, OUTCOMES
 from sm_bt.ros.runtime import RosRuntime
 
 pytestmark = pytest.mark.ros
@@ -68,12 +71,19 @@ LEASED = QoSProfile(depth=10, liveliness=LivelinessPolicy.AUTOMATIC,
 
 class ScriptedManager:
     """``/robot1/pilot`` served as the reference serves it; ``requests`` lists what it was asked.
-    ``lease``: its ``mode_event`` offers sm-bt manager's liveliness lease (the reference offers none)."""
+    ``lease``: its ``mode_event`` offers sm-bt manager's liveliness lease (the reference offers none).
+    ``outcomes``: it serves sm-bt manager's ``request_change`` and ``request_outcome``."""
 
-    def __init__(self, ros: RosContext, *, lease: bool = False) -> None:
+    def __init__(self, ros: RosContext, *, lease: bool = False, outcomes: bool = False) -> None:
         node = ros.node
         self.state, self.mode = State.UNKNOWN, "unknown"
         self.requests: list[str] = []
+        # How its next requests end on request_outcome: "succeeded" or "failed" once it moved (failed:
+        # it does not move), None: never told; first: told before its answer. refusal: refused so.
+        self.outcome: str | None = "succeeded"
+        self.outcome_first = False
+        self.refusal = ""
+        self._numbers = iter(range(1, 1000))
         self.events = True  # publish events for its moves (the reference sometimes does not)
         self.sm_bt_switch = False  # switch an active system as sm-bt manager tells it (switch_as_sm_bt)
         self.running = threading.Event()  # cleared: its Python hangs (in the next get_state it answers)
@@ -87,6 +97,9 @@ class ScriptedManager:
             node.create_service(GetMode, f"{prefix}/get_mode", self._get_mode),
             node.create_service(ChangeState, f"{prefix}/change_state", self._change_state),
             node.create_service(ChangeMode, f"{prefix}/change_mode", self._change_mode)]
+        if outcomes:
+            self._outcomes = node.create_publisher(RequestOutcome, f"{prefix}/request_outcome", OUTCOMES)
+            self._services.append(node.create_service(RequestChange, f"{prefix}/request_change", self._request_change))
 
     def move(self, state: State, mode: str) -> None:
         """Its system is now ``state`` in ``mode`` (its nodes moved), told as its timer would."""
@@ -157,6 +170,31 @@ class ScriptedManager:
         return response
 
 
+    def _request_change(self, request: RequestChange.Request,
+                        response: RequestChange.Response) -> RequestChange.Response:
+        what = request.mode or request.transition
+        self.requests.append(f"request_change {what} [{request.requester}]")
+        response.request = number = next(self._numbers)
+        if self.refusal:
+            response.accepted, response.reason = False, self.refusal
+            return response
+        response.accepted = True
+        outcome = self.outcome
+        told = RequestOutcome(request=number, description=f"change_mode pilot {what}", requester=request.requester,
+                              outcome=outcome or "", reason="" if outcome == "succeeded" else "amcl: activate failed")
+        if outcome is None:
+            return response
+        if self.outcome_first:
+            self._outcomes.publish(told)
+            if outcome == "succeeded":
+                self.move(State.ACTIVE, request.mode)
+            return response
+        if outcome == "succeeded":
+            self._later(State.ACTIVE, request.mode)
+        threading.Timer(2 * DELAY, self._outcomes.publish, (told,)).start()
+        return response
+
+
 @pytest.fixture
 def scripted(ros_context: RosContext) -> ScriptedManager:
     return ScriptedManager(ros_context)
@@ -164,8 +202,9 @@ def scripted(ros_context: RosContext) -> ScriptedManager:
 
 @pytest.fixture
 def scripted_sm_bt(ros_context: RosContext) -> ScriptedManager:
-    """It plays sm-bt manager: its mode_event offers sm-bt manager's lease."""
-    return ScriptedManager(ros_context, lease=True)
+    """It plays sm-bt manager: its mode_event offers sm-bt manager's lease, it takes request_change and
+    tells request_outcome."""
+    return ScriptedManager(ros_context, lease=True, outcomes=True)
 
 
 def _leases_asked(ros: RosContext, topic: str) -> list[float]:
@@ -334,5 +373,86 @@ def test_served_by_sm_bt_a_manager_hung_while_its_dds_threads_live_is_told_by_it
         finally:
             scripted.running.set()
         wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 5.0, "robot1 never read again")
+    finally:
+        runtime.close()
+
+
+def test_served_by_sm_bt_a_change_is_done_when_the_robots_request_ends_told_before_or_after_its_answer(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    """Asked through request_change, as the fleet: done with the robot's request, whose outcome may
+    come before the answer that numbers it (two channels)."""
+    scripted = scripted_sm_bt
+    scripted.move(State.ACTIVE, "f_normal_mode")
+    runtime = _fleet(tmp_path, extra="")
+    try:
+        manager = runtime.manager
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+        _done(runtime, "FAST")
+        scripted.outcome_first = True
+        _done(runtime, "__DEFAULT__")
+        assert scripted.requests == ["request_change f_performance_mode [fleet]",
+                                     "request_change f_normal_mode [fleet]"]
+    finally:
+        runtime.close()
+
+
+def test_served_by_sm_bt_a_robots_failed_or_refused_request_fails_the_fleets_at_once_with_its_reason(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    scripted = scripted_sm_bt
+    scripted.move(State.ACTIVE, "f_normal_mode")
+    runtime = _fleet(tmp_path, extra="")  # its request timeout: 10 s
+    try:
+        manager = runtime.manager
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+        scripted.outcome = "failed"
+        request = manager.change_mode("fleet", "FAST")
+        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+        assert took < 3.0 and not request.succeeded
+        assert request.reason == ("robot1: change_mode f_performance_mode failed: its manager's request #1 failed: "
+                                  "amcl: activate failed"), request.reason
+        scripted.refusal = "pilot is held in active.f_normal_mode by safety (priority 90)"
+        request = manager.change_mode("fleet", "FAST")
+        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+        assert took < 3.0 and not request.succeeded
+        assert request.reason == (
+            "robot1: change_mode f_performance_mode failed: the manager of robot1 refused mode f_performance_mode: "
+            "pilot is held in active.f_normal_mode by safety (priority 90)"), request.reason
+    finally:
+        runtime.close()
+
+
+def test_served_by_sm_bt_a_request_whose_outcome_never_comes_fails_at_the_outcome_timeout_or_when_out_of_reach(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    scripted = scripted_sm_bt
+    scripted.move(State.ACTIVE, "f_normal_mode")
+    runtime = _fleet(tmp_path, extra="", outcome_timeout=1.5)
+    try:
+        manager = runtime.manager
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+        scripted.outcome = None
+        request = manager.change_mode("fleet", "FAST")
+        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+        assert 1.5 <= took < 4.0 and not request.succeeded
+        assert request.reason == ("robot1: change_mode f_performance_mode failed: its manager told no outcome of its "
+                                  "request #1 (change_mode f_performance_mode) within 1.5 s"), request.reason
+    finally:
+        runtime.close()
+    runtime = _fleet(tmp_path, extra="")  # the outcome timeout: 60 s
+    try:
+        manager = runtime.manager
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+        request = manager.change_mode("fleet", "FAST")
+        wait_until(lambda: "request_change f_performance_mode [fleet]" in scripted.requests[1:], 5.0, "never asked")
+        scripted.running.clear()  # hung: out of reach a few probes later, and what it owes fails
+        try:
+            took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+        finally:
+            scripted.running.set()
+        assert took < 5.0 and not request.succeeded
+        assert "no answer from the manager of robot1" in request.reason, request.reason
+        # What it owed failed with it: the next request is sent (not held up by the one never told).
+        scripted.outcome = "succeeded"
+        wait_until(lambda: manager.actual("robot1").state is State.ACTIVE, 5.0, "robot1 never read again")
+        _done(runtime, "FAST")
     finally:
         runtime.close()

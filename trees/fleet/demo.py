@@ -118,7 +118,7 @@ class FleetDemo:
         if request is None:
             return
         if _starts(event):
-            self.say(f"    {robot}'s manager -> {event.message}")
+            self.say(f"    {robot}'s manager -> {event.message} [{request.requester}]")
         else:
             self.say(f"    {robot}'s manager <- {event.message}", "" if request.succeeded else "red")
 

@@ -1,0 +1,104 @@
+"""The requests a fleet made of one robot's ``sm-bt manager``, until each one's outcome comes.
+
+A fleet asks an sm-bt robot through its ``request_change`` service (with the fleet's requester, so
+that the robot's holds and log name it), whose answer carries the robot's number of the request;
+the robot says how each request ended on ``request_outcome`` (:mod:`sm_bt.ros.manager_node`). The
+fleet's call is done when that outcome comes: a robot whose request fails fails the fleet's at once,
+with the robot's reason, rather than at the fleet's timeout, as the simulated fleet's
+(:class:`sm_bt.sim.remotes.RemoteManagers`) does.
+
+An outcome may come before the answer that names its number (the topic and the service are two
+channels): the fleet's own outcomes are kept until then. A robot that goes out of reach fails the
+requests it owes (its numbers start again if its manager restarts), and an outcome that never comes
+fails its request after ``timeout`` seconds (the robot's requests all end within its own request
+timeout: only a lost message gets there).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Any
+
+from sm_bt.engine.backend import CallResult, Done
+from sm_bt.engine.clock import Clock
+from sm_bt.model.types import FLEET_REQUESTER
+
+#: Outcomes of the fleet's requests kept while their answers are on the way (a few at most).
+EARLY_OUTCOMES = 16
+
+
+@dataclass
+class _Pending:
+    label: str
+    done: Done
+    timer: Any = None
+
+
+class RobotRequests:
+    """The fleet's requests that ``part``'s manager accepted and has not ended yet."""
+
+    def __init__(self, part: str, clock: Clock, timeout: float) -> None:
+        self.part = part
+        self._clock = clock
+        self.timeout = timeout
+        self._lock = threading.Lock()
+        self._pending: dict[int, _Pending] = {}
+        self._early: OrderedDict[int, CallResult] = OrderedDict()
+
+    def accepted(self, number: int, label: str, done: Done) -> None:
+        """Its manager accepted ``label`` as request ``number``: ``done`` when it ends."""
+        with self._lock:
+            result = self._early.pop(number, None)
+            if result is None:
+                pending = _Pending(label, done)
+                self._pending[number] = pending
+                pending.timer = self._clock.call_later(self.timeout, lambda: self._expired(number, pending))
+        if result is not None:
+            done(result)
+
+    def ended(self, message: Any) -> None:
+        """A ``RequestOutcome`` of its manager (anybody's: only the fleet's own count)."""
+        if message.requester != FLEET_REQUESTER:
+            return
+        number = int(message.request)
+        outcome = str(message.outcome)
+        result = CallResult(True) if outcome == "succeeded" else CallResult(
+            False, f"its manager's request #{number} {outcome}: {message.reason}")
+        with self._lock:
+            pending = self._pending.pop(number, None)
+            if pending is None:
+                self._early[number] = result
+                while len(self._early) > EARLY_OUTCOMES:
+                    self._early.popitem(last=False)
+                return
+        self._finish(pending, result)
+
+    def lost(self, why: str) -> None:
+        """Its manager is out of reach: what it owes fails (a new process numbers its requests anew)."""
+        with self._lock:
+            owed, self._pending = self._pending, {}
+            self._early.clear()
+        for number, pending in owed.items():
+            self._finish(pending, CallResult(False, f"its manager went out of reach during its request #{number} "
+                                                    f"({pending.label}): {why}"))
+
+    @property
+    def owed(self) -> int:
+        with self._lock:
+            return len(self._pending)
+
+    def _expired(self, number: int, pending: _Pending) -> None:
+        with self._lock:
+            if self._pending.get(number) is not pending:
+                return
+            del self._pending[number]
+        self._finish(pending, CallResult(False, f"its manager told no outcome of its request #{number} "
+                                                f"({pending.label}) within {self.timeout:g} s"))
+
+    @staticmethod
+    def _finish(pending: _Pending, result: CallResult) -> None:
+        if pending.timer is not None:
+            pending.timer.cancel()
+        pending.done(result)

@@ -1,0 +1,125 @@
+"""One robot of a fleet as :class:`~sm_bt.ros.remote_parts.RemoteBackend` knows it, and the calls
+to its manager, each with a timeout and paced as its kind of manager needs.
+
+The reference's answers run ahead of its events, and it takes its own node ``mode_event``s (sent
+at its next 1 s tick) for news of its nodes: a request made before that tick is planned from a
+wrong view and never ends (seen: ``deactivating`` for good). So after a change it accepted, its
+word is taken from its events, from its answers only :data:`REFERENCE_EVENTS` s later (it
+sometimes sends no event at all), and its next request is made no sooner, nor sooner than
+:data:`REFERENCE_ECHO` s after its last event. sm-bt manager needs no pacing.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from sm_bt.engine.clock import WallClock
+from sm_bt.model.states import State
+from sm_bt.ros.remote_requests import RobotRequests
+
+#: The reference sends a change's events at its 1 s timer's next tick, or the one after: its answers
+#: are taken for news that long after a change it accepted (it sometimes sends no event at all).
+REFERENCE_EVENTS = 2.2
+#: After an event of the reference, its next request waits this long: its own node mode_events of
+#: the same tick, which it takes for news of its nodes, are back with it by then.
+REFERENCE_ECHO = 0.2
+
+
+@dataclass
+class Robot:
+    """A remote part, its manager's clients, and what the fleet knows of it (guarded by the
+    backend's lock)."""
+
+    part: str
+    fqn: str
+    change_state: Any
+    get_state: Any
+    change_mode: Any
+    get_mode: Any
+    reference: bool  # served by the reference's mode_manager
+    request_change: Any  # an sm-bt manager's (None for the reference)
+    requests: RobotRequests | None  # what an sm-bt manager accepted and has not ended yet
+    subscriptions: list[Any] = field(default_factory=list)
+    liveliness: Any = None  # the subscription that asks for the lease of its manager's mode_event
+    lively: bool = False  # DDS vouches for its manager's process (the lease's writer is alive)
+    present: bool = False
+    last_heard: float = float("-inf")
+    probing: bool = False
+    failed_at: float = float("-inf")  # when the last probe left unanswered was sent
+    timer: Any = None  # the next probe
+    generation: int = 0  # of the probes' chain: a probe of an older one does nothing
+    #: As reported to the engine; ``mode`` of a robot that is not active: the one to activate it in.
+    state: State = State.UNKNOWN
+    mode: str = ""
+    known: bool = False  # its manager has known its state
+    assumed: bool = False  # taken for unconfigured while the reference still answers unknown
+    reads_from: float = float("-inf")  # its answers are news from then on (the reference, after a change)
+    requests_from: float = float("-inf")  # its next change request no sooner (the reference, after a change)
+    events: int = 0  # events received: an answer to a call sent before the last one is older news
+    asked: str | None = None  # a mode its manager accepted and has not reported yet: read at each probe
+
+
+class RobotCalls:
+    """Calls to robots' managers on ``clock``, ``lock`` being the backend's (it guards the robots)."""
+
+    def __init__(self, clock: WallClock, lock: threading.Lock, call_timeout: float) -> None:
+        self._clock = clock
+        self._lock = lock
+        self.call_timeout = call_timeout
+
+    def heard_event(self, robot: Robot) -> None:
+        """(With the lock held.) An event of its manager: the reference has ticked."""
+        robot.events += 1
+        robot.last_heard = self._clock.now()
+        if robot.reference:
+            robot.requests_from = min(robot.requests_from, robot.last_heard + REFERENCE_ECHO)
+
+    def change(self, robot: Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
+               failed: Callable[[str], None]) -> None:
+        """A change request (see :meth:`call`); to the reference, paced (see the module)."""
+        with self._lock:
+            wait = robot.requests_from - self._clock.now() if robot.reference else 0.0
+        if wait > 0:
+            self._clock.call_later(wait, lambda: self.change(robot, client, request, label, answered, failed))
+            return
+
+        def accepted(response: Any) -> None:
+            if robot.reference and response.success:
+                with self._lock:
+                    robot.reads_from = robot.requests_from = self._clock.now() + REFERENCE_EVENTS
+            answered(response)
+
+        self.call(robot, client, request, label, accepted, failed)
+
+    def call(self, robot: Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
+             failed: Callable[[str], None], timeout: float | None = None) -> None:
+        """``request`` on ``client``: ``answered(response)``, or ``failed(why)`` once ``timeout`` passed
+        (the call timeout unless given). Any answer is word from its manager."""
+        if not client.service_is_ready():
+            self._clock.call_later(0.0, lambda: failed(f"{robot.fqn}: no manager serves it ({label})"))
+            return
+        future = client.call_async(request)
+        finished = threading.Event()
+
+        def on_done(_: Any) -> None:
+            if finished.is_set():
+                return
+            finished.set()
+            response = future.result()
+            with self._lock:
+                robot.last_heard = self._clock.now()
+            answered(response)
+
+        def on_timeout() -> None:
+            if finished.is_set():
+                return
+            finished.set()
+            client.remove_pending_request(future)
+            failed(f"the manager of {robot.part} did not answer {label} within {limit:g} s")
+
+        limit = timeout if timeout is not None else self.call_timeout
+        future.add_done_callback(on_done)
+        self._clock.call_later(limit, on_timeout)
