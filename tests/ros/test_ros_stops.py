@@ -17,7 +17,7 @@ from system_modes_msgs.srv import ChangeMode
 
 pytestmark = pytest.mark.ros
 
-STOPS = 6
+STOPS = 4
 #: SIGINT to exit.
 PROMPT = 2.0
 

@@ -88,7 +88,7 @@ actions = st.lists(st.one_of(
 
 
 @pytest.mark.long
-@examples(300, stress=10_000)
+@examples(100, stress=10_000)
 @given(plan=actions)
 def test_subscribers_hear_only_what_is_true_when_they_hear_it(world: World, plan: list[tuple[str, Any, str]]) -> None:
     readers: list[Reader] = []

@@ -122,6 +122,11 @@ def _assert_nothing_cut(report: dict[str, Any], where: str, running: bool = True
         assert _inside(item["box"], view) and _inside(item["box"], item["clip"]), f"{where}: {item} not in view"
 
 
+#: The tests that read the recorded demo run in one pytest-xdist worker (``--dist loadgroup``): the
+#: recording is made once, not once per worker (15-20 s each on a loaded machine).
+RECORDED = pytest.mark.xdist_group("view_recording")
+
+
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> list[Frame]:
     """The whole demo (two rounds, the laser failure) recorded at full speed."""
@@ -173,6 +178,7 @@ def test_the_page_shows_the_running_tree_the_modes_and_the_events_during_the_dem
     assert 'data-once="true"' in dom
 
 
+@RECORDED
 @pytest.mark.parametrize("size", SIZES, ids=[f"{w}x{h}" for w, h in SIZES])
 def test_nothing_is_cut_on_a_screen_of(size: tuple[int, int], replay: ViewServer) -> None:
     for moment, query in MOMENTS.items():
@@ -209,6 +215,7 @@ def test_long_part_and_mode_names_wrap_instead_of_being_cut() -> None:
     _assert_nothing_cut(report, "long names")
 
 
+@RECORDED
 def test_a_requests_plan_is_shown_with_it_in_the_list_and_on_its_band(replay: ViewServer) -> None:
     dom = _browse(f"{replay.url}?at=17.6")
     item = re.search(r'<li class="request[^"]*"[^>]*title="(change_mode pilot f_degraded_mode: [^"]*)"[^>]*>'
@@ -220,6 +227,7 @@ def test_a_requests_plan_is_shown_with_it_in_the_list_and_on_its_band(replay: Vi
                      r"change_mode pilot f_degraded_mode: 3 calls", dom), "and on its band's tooltip"
 
 
+@RECORDED
 def test_the_page_follows_the_scrubber_to_the_end_of_a_replay(replay: ViewServer, recording: list[Frame]) -> None:
     dom = _browse(replay.url + "?check", screenshot=SHOTS / "replay-end-1280x800.png")
     assert 'data-ended="true"' in dom, "the replay's end reached the page"
@@ -231,6 +239,7 @@ def test_the_page_follows_the_scrubber_to_the_end_of_a_replay(replay: ViewServer
     assert last[:40] in report["current"][-1]["name"], (last, report["current"])  # the list followed
 
 
+@RECORDED
 def test_a_page_load_of_the_demo_weighs_under_3_mb(recording: list[Frame]) -> None:
     """Everything, the py_trees_js assets included (a browser caches those): format 1 sent 29 MB."""
     server = ViewServer(port=0, frames=recording)
@@ -278,6 +287,7 @@ def _text_of(png: bytes) -> str | None:
     return None
 
 
+@RECORDED
 def test_docs_view_png_is_current(replay: ViewServer) -> None:
     if os.environ.get(WRITE_DOCS_PNG):
         shot = SHOTS / "docs-1280x800.png"
