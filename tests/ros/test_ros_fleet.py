@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from lifecycle_msgs.msg import TransitionEvent
 from lifecycle_msgs.srv import GetState
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
@@ -157,3 +158,45 @@ def test_a_robots_failed_request_fails_the_fleets_at_once_with_the_robots_reason
     assert "amcl: activate failed" in night.reason, night.reason
     assert took < 10.0, f"the fleet's request failed {took:.1f} s after it was made"
     assert "change_mode pilot f_energy_saving_mode started [fleet]" in managers["robot1"].stderr
+
+
+def test_a_robot_manager_killed_mid_change_fails_the_fleets_at_once_and_a_new_one_is_taken_on(
+        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
+        fleet: RosRuntime) -> None:
+    """robot1's manager is killed while its slow nodes take their last steps for the fleet: the fleet's
+    request fails within the liveness window, not at its timeout. The operator starts a new manager
+    (its request numbers start again at 1), which finds the nodes where they went: the fleet reads it
+    afresh and is consistent with it and with its own target.
+
+    Killed before it sent its nodes' last steps, it leaves them between modes, and the new manager
+    infers its system unknown (its nodes answer, they match no mode): the fleet then takes robot1 for
+    lost and never asks it for its target, as it cannot tell that from a manager whose nodes are out
+    of its reach (not handled yet: README, "Fleets")."""
+    managers = {name: start_manager("--namespace", f"/{name}") for name in ("robot1", "robot2")}
+    node_processes("pilot", "--namespace", "/robot1", "--state", "inactive", "--transition-delay", "1.0")
+    node_processes("pilot", "--namespace", "/robot2", "--state", "inactive")
+    for manager in managers.values():
+        manager.ready()
+    fleet_manager = fleet.manager
+    wait_until(lambda: all(fleet_manager.actual(r).state is State.INACTIVE for r in managers), 20.0,
+               "the fleet never read its robots")
+    # controller_server's activation is the last step sent (after its mode's parameters).
+    steps = ros_context.subscribe(TransitionEvent, "/robot1/controller_server/transition_event")
+    time.sleep(1.0)  # matched
+    night = fleet_manager.change_mode("fleet", "NIGHT")
+    wait_until(lambda: any(step.goal_state.label == "activating" for step in steps), 10.0,
+               "robot1's controller_server never started to activate")
+    robot1 = managers["robot1"]
+    assert robot1.process is not None
+    robot1.process.kill()
+    killed = time.monotonic()
+    wait_until(lambda: night.done, 10.0, "the fleet's request did not end")
+    took = time.monotonic() - killed
+    assert not night.succeeded and "no answer from the manager of robot1" in night.reason, night.reason
+    assert took <= WINDOW + 2 * LATENCY, f"the fleet's request failed {took:.2f} s after robot1's manager was killed"
+    assert fleet_manager.actual("robot1").state is State.UNKNOWN
+
+    start_manager("--namespace", "/robot1").ready()
+    wait_until(lambda: str(fleet_manager.actual("robot1")) == "active.f_energy_saving_mode", 20.0,
+               "robot1 never read afresh from its new manager")
+    wait_until(lambda: str(fleet_manager.actual("fleet")) == "active.NIGHT", 5.0, "the fleet never NIGHT")
