@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import io
 import re
 from pathlib import Path
@@ -21,9 +22,21 @@ def run_demo(**options: object) -> tuple[int, str, Demo]:
     return code, out.getvalue(), demo
 
 
+@functools.cache
+def shared_run(tree: str) -> tuple[int, str, Demo]:
+    """The default demo of ``tree``, run once for the tests that only read it (the same worker runs
+    them all: :data:`SHARED`)."""
+    return run_demo(tree=tree)
+
+
+#: The tests that read :func:`shared_run` go to one pytest-xdist worker (``--dist loadgroup``).
+SHARED = pytest.mark.xdist_group("demo_shared_run")
+
+
+@SHARED
 @pytest.mark.parametrize("tree", ["pilot", "metacontrol"])
 def test_demo_tells_the_whole_story(tree: str) -> None:
-    code, text, demo = run_demo(tree=tree)
+    code, text, demo = shared_run(tree)
     assert code == 0, text
     story = PILOT_DEMO_STORY
     # Two rounds: the robot drives to the station, and normal mode comes back after the recharge.
@@ -76,9 +89,10 @@ def first(lines: list[Line], pattern: str, start: int = 0) -> int:
     return next(i for i in range(start, len(lines)) if re.search(pattern, lines[i][1]))
 
 
+@SHARED
 @pytest.mark.parametrize("tree", ["pilot", "metacontrol"])
 def test_the_narration_is_true_in_causal_order_and_names_who_asked(tree: str) -> None:
-    code, text, _ = run_demo(tree=tree)
+    code, text, _ = shared_run(tree)
     assert code == 0, text
     lines = narrative(text)
     assert [at for at, _ in lines] == sorted(at for at, _ in lines)  # never back in time
@@ -125,8 +139,9 @@ def test_the_narration_is_true_in_causal_order_and_names_who_asked(tree: str) ->
     assert "user requests" not in summary
 
 
+@SHARED
 def test_tree_dumps_show_feedback_only_for_what_the_tick_visited_and_conditions_in_words() -> None:
-    _, text, _ = run_demo(tree="pilot")
+    _, text, _ = shared_run("pilot")
     dumps = [line for line in text.splitlines() if re.match(r"^\s*(-->|\[o\]|\[-\]|\{-\}|\{o\}|/_/|-\^-) ", line)]
     assert dumps
     for line in dumps:
@@ -172,11 +187,12 @@ def test_bad_options_are_usage_errors(argv: list[str], capsys: pytest.CaptureFix
     assert "Traceback" not in capsys.readouterr().err
 
 
+@SHARED
 def test_the_xml_pilot_tree_runs_the_same_demo_as_the_python_one() -> None:
     from sm_bt.trees import pilot
 
     code, xml_text, xml_demo = run_demo(tree=str(pilot.XML))
-    _, python_text, python_demo = run_demo(tree="pilot")
+    _, python_text, python_demo = shared_run("pilot")
     assert code == 0, xml_text
     assert _told(xml_demo) == _told(python_demo)
     assert _summary(xml_text) == _summary(python_text)
