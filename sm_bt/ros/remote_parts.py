@@ -19,28 +19,24 @@ the reference's ``mode_manager``. :class:`RemoteBackend` speaks to it as any cli
   ``change_state`` (transition id and label: it reads the id); its ``success`` means accepted, and
   the change counts as done then (the robot's reports confirm it);
 * liveness: ``get_state`` every ``probe_interval`` s; no answer for ``liveness_timeout`` s makes it
-  out of reach ("no answer from the manager of robot1 ..."), and the fleet's rules react. While
-  out of reach it is asked again every probe; the first answer is its reappearance. A manager
-  that answers ``unknown`` has lost its part (its nodes are out of its reach), except before it
-  has ever known it: the reference (``served_by: reference``) learns states only from its nodes'
-  events, so until a node moves it knows nothing of nodes that wait unconfigured, and the part is
-  taken for unconfigured;
-* liveliness (a robot served by sm-bt manager): each probe costs this process about a millisecond
-  of Python, so fast probes of many robots cost a few percent of a core. sm-bt manager's
-  ``mode_event`` offers a DDS liveliness lease (``sm_bt.ros.manager_node.MODE_EVENT_LEASE``),
-  which DDS asserts from its own threads; the fleet asks for a lease of ``liveness_timeout`` s on
-  a second subscription of that topic, and DDS tells it when no assertion came for that long (the
-  manager's process stopped, exited or was cut off): the same "no answer" verdict as above,
-  counted from the manager's last word, ``LIVELINESS_GRACE`` s later. While DDS vouches for it,
-  the robot is probed only every ``slow_probe_interval`` s (3 s): a manager whose Python hangs
-  while its DDS threads live still asserts its liveliness, and a probe left unanswered for
-  ``liveness_timeout`` s (asked again at once) makes it out of reach too, a fast probe interval
-  later. Out of reach, while a change it accepted is unconfirmed, or before DDS has vouched for it,
-  it is probed at the fast pace as above; a manager that offers no lease (an older sm-bt
-  manager) is told once, as a warning, and its events are still heard on the first subscription,
-  which asks for no lease. The liveliness subscriptions are on a node of the backend's own, spun
-  by a plain executor in a thread of its own (:class:`~sm_bt.ros.remote_liveliness.Liveliness`): rclpy's EventsExecutor,
-  which spins the backend's node, calls no liveliness callback;
+  out of reach ("no answer from the manager of robot1 ..."), and the fleet's rules react; what its
+  manager owed the fleet fails. While out of reach it is asked again every probe; the first answer
+  is its reappearance. A manager that answers ``unknown`` has lost its part (its nodes are out of
+  its reach), with two exceptions. The reference (``served_by: reference``) learns states only
+  from its nodes' events, so until a node moves it knows nothing of nodes that wait unconfigured:
+  before it has ever known the part, it is taken for unconfigured. sm-bt manager with no target
+  knows no mode of nodes left between modes (by a predecessor it replaced): its preview of a change
+  is possible then, and the part is taken for active in no mode, which the fleet's recovery asks
+  for its target;
+* liveliness (sm-bt manager): its ``mode_event`` offers a DDS liveliness lease
+  (:mod:`~sm_bt.ros.remote_liveliness`), and DDS tells the fleet, from its own threads, when no
+  assertion came for ``liveness_timeout`` s (the process stopped, exited or was cut off): the same
+  verdict, ``LIVELINESS_GRACE`` s later. While DDS vouches for it, a robot is probed every
+  ``slow_probe_interval`` s (3 s; a probe costs this process about a millisecond of Python), which
+  tells a manager whose Python hangs while its DDS threads live: a probe unanswered for the window
+  is asked again at once, and a fast interval later it is out of reach. Out of reach, with a change
+  unconfirmed, or before DDS vouched for it, it is probed every ``probe_interval`` s; a manager that
+  offers no lease (an older sm-bt manager) is told once, as a warning;
 * the reference is paced: after a change it accepted, its events are its word, and its next
   request waits for them (:mod:`~sm_bt.ros.remote_robots`).
 
@@ -51,6 +47,7 @@ never called with this backend's lock held.
 from __future__ import annotations
 
 import functools
+import json
 import logging
 import threading
 from collections.abc import Callable, Mapping, Sequence
@@ -63,7 +60,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sm_bt_msgs.msg import RequestOutcome
-from sm_bt_msgs.srv import RequestChange
+from sm_bt_msgs.srv import PreviewChange, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetMode
 
@@ -126,6 +123,7 @@ class RemoteBackend:
                 node.create_client(GetState, f"{fqn}/get_state"), node.create_client(ChangeMode, f"{fqn}/change_mode"),
                 node.create_client(GetMode, f"{fqn}/get_mode"), reference,
                 None if reference else node.create_client(RequestChange, f"{fqn}/request_change"),
+                None if reference else node.create_client(PreviewChange, f"{fqn}/preview_change"),
                 None if reference else RobotRequests(part.name, self._clock, outcome_timeout))
         self._liveliness: Liveliness | None = None
 
@@ -203,8 +201,8 @@ class RemoteBackend:
         message = TransitionMessage(id=int(transition.value), label=transition.label)
         refused = CallResult(False, refusal, refused=True)
         self._calls.change(robot, robot.change_state, ChangeState.Request(transition=message), label,
-                     lambda response: done(CallResult(True) if response.success else refused),
-                     lambda why: done(CallResult(False, why)))
+                           lambda response: done(CallResult(True) if response.success else refused),
+                           lambda why: done(CallResult(False, why)))
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         robot = self._robots[node]
@@ -297,8 +295,8 @@ class RemoteBackend:
         self._judge(robot)
         if asking:
             self._calls.call(robot, robot.get_state, GetState.Request(), "get_state (liveness)",
-                       lambda response: self._state_answer(robot, state_of(response.current_state.id), events),
-                       lambda why: self._probe_failed(robot, sent), timeout=self.liveness_timeout)
+                             lambda response: self._state_answer(robot, state_of(response.current_state.id), events),
+                             lambda why: self._probe_failed(robot, sent), timeout=self.liveness_timeout)
         if reading is not None:  # a manager that sends no event (the reference, at times) is read
             self._read_mode(robot, reading)
         if due < self.probe_interval:
@@ -382,32 +380,73 @@ class RemoteBackend:
             robot.last_heard = self._clock.now()
             if state is State.UNKNOWN:
                 action = "keep" if robot.assumed else "assume" if (
-                    not robot.known and not robot.present and robot.reference) else "lost"
+                    not robot.known and not robot.present and robot.reference) else "unknown"
             elif not robot.present:
                 action = "read"
             else:  # no event since it was asked: the answer is the newer news
                 action = "correct" if (events == robot.events and state is not robot.state
                                        and self._clock.now() >= robot.reads_from) else "keep"
-        if action == "lost":
+        if action == "unknown":
             self._unknown(robot)
         elif action == "assume":
             self._appear(robot, State.UNCONFIGURED, "", assumed=True)
         elif action == "read":  # at start, or after it was out of reach: read its mode too, then report it
             self._calls.call(robot, robot.get_mode, GetMode.Request(), "get_mode",
-                       lambda response: self._appear(robot, state, str(response.current_mode)), lambda why: None)
+                             lambda response: self._appear(robot, state, str(response.current_mode)),
+                             lambda why: None)
         elif action == "correct":
             self._state(robot, state)
 
     def _unknown(self, robot: Robot) -> None:
-        """Its manager answers, but does not know where its part is (its own nodes out of reach): out
-        of reach for the fleet too, and read afresh once its manager knows (its events will not
-        repeat a mode it had before)."""
+        """Its manager answers, but knows no state of its part: its nodes are out of its reach, or (sm-bt
+        manager) they answer between modes and it has no target, as a manager finds them that was
+        started after its predecessor left them so. sm-bt manager's preview of a change tells which:
+        possible, with no node to wait for, only in the second case."""
+        if robot.preview_change is None:
+            self._lost(robot)
+            return
+
+        def answered(response: Any) -> None:
+            waits = json.loads(response.json).get("waits", []) if response.possible and response.json else []
+            if response.possible and not any(wait.endswith(" to appear") for wait in waits):
+                self._between(robot)
+            else:
+                self._lost(robot)
+
+        self._calls.call(robot, robot.preview_change, PreviewChange.Request(mode=DEFAULT_MODE), "preview_change",
+                         answered, lambda why: self._lost(robot))
+
+    def _lost(self, robot: Robot) -> None:
+        """Its manager does not know where its part is (its own nodes out of reach): out of reach for
+        the fleet too, and read afresh once its manager knows (its events will not repeat a mode it
+        had before)."""
         with self._lock:
             was = robot.present
             robot.present = robot.assumed = False
         if was:
             self._report(lambda listener: listener.node_vanished(
                 robot.part, f"the manager of {robot.part} does not know where {robot.fqn} is"))
+
+    def _between(self, robot: Robot) -> None:
+        """Its nodes answer between modes: active in no mode to the fleet (a mode asked of it is then
+        asked of its manager, as a deactivation is), which the fleet's divergence and recovery see."""
+        with self._lock:
+            if self._listener is None:
+                return
+            appeared, news = not robot.present, robot.present and (robot.state, robot.mode) != (State.ACTIVE, "")
+            was = robot.state
+            robot.present, robot.state, robot.mode, robot.assumed, robot.known = True, State.ACTIVE, "", False, True
+            robot.last_heard = self._clock.now()
+        if appeared or news:
+            log.info("%s: its manager knows no mode of %s (its nodes answer, between modes, and it has no target): "
+                     "taken for active in no mode", robot.part, robot.fqn)
+        if appeared:
+            report = NodeReport(State.ACTIVE, {REMOTE_MODE: ""})
+            self._report(lambda listener: listener.node_appeared(robot.part, report))
+        elif news:
+            if was is not State.ACTIVE:
+                self._report(lambda listener: listener.node_state(robot.part, State.ACTIVE))
+            self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: ""}))
 
     def _appear(self, robot: Robot, state: State, mode: str, *, assumed: bool = False) -> None:
         if mode == "unknown" and not assumed:  # not known yet after all: the next probe reads it again

@@ -41,6 +41,7 @@ class Robot:
     get_mode: Any
     reference: bool  # served by the reference's mode_manager
     request_change: Any  # an sm-bt manager's (None for the reference)
+    preview_change: Any  # an sm-bt manager's (None for the reference)
     requests: RobotRequests | None  # what an sm-bt manager accepted and has not ended yet
     subscriptions: list[Any] = field(default_factory=list)
     liveliness: Any = None  # the subscription that asks for the lease of its manager's mode_event

@@ -17,6 +17,7 @@ is an older sm-bt manager: told as a warning, probed at the fast pace, its event
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -30,7 +31,7 @@ from rclpy.duration import Duration
 from rclpy.qos import LivelinessPolicy, QoSProfile
 from ros_processes import RosContext, wait_until
 from sm_bt_msgs.msg import RequestOutcome
-from sm_bt_msgs.srv import RequestChange
+from sm_bt_msgs.srv import PreviewChange, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetMode
 
@@ -83,6 +84,9 @@ class ScriptedManager:
         self.outcome: str | None = "succeeded"
         self.outcome_first = False
         self.refusal = ""
+        # Its preview of a change while it knows no state: its nodes out of its reach (refused), not seen
+        # yet (waits), or between modes (possible).
+        self.preview: tuple[bool, list[str]] = (False, [])
         self._numbers = iter(range(1, 1000))
         self.events = True  # publish events for its moves (the reference sometimes does not)
         self.sm_bt_switch = False  # switch an active system as sm-bt manager tells it (switch_as_sm_bt)
@@ -100,6 +104,7 @@ class ScriptedManager:
         if outcomes:
             self._outcomes = node.create_publisher(RequestOutcome, f"{prefix}/request_outcome", OUTCOMES)
             self._services.append(node.create_service(RequestChange, f"{prefix}/request_change", self._request_change))
+            self._services.append(node.create_service(PreviewChange, f"{prefix}/preview_change", self._preview_change))
 
     def move(self, state: State, mode: str) -> None:
         """Its system is now ``state`` in ``mode`` (its nodes moved), told as its timer would."""
@@ -192,6 +197,15 @@ class ScriptedManager:
         if outcome == "succeeded":
             self._later(State.ACTIVE, request.mode)
         threading.Timer(2 * DELAY, self._outcomes.publish, (told,)).start()
+        return response
+
+
+    def _preview_change(self, request: PreviewChange.Request,
+                        response: PreviewChange.Response) -> PreviewChange.Response:
+        possible, waits = self.preview
+        response.possible = possible
+        response.refused = "" if possible else "amcl is not reachable (no answer from /robot1/amcl for 0.9 s)"
+        response.json = json.dumps({"waits": waits})
         return response
 
 
@@ -454,5 +468,30 @@ def test_served_by_sm_bt_a_request_whose_outcome_never_comes_fails_at_the_outcom
         scripted.outcome = "succeeded"
         wait_until(lambda: manager.actual("robot1").state is State.ACTIVE, 5.0, "robot1 never read again")
         _done(runtime, "FAST")
+    finally:
+        runtime.close()
+
+
+def test_served_by_sm_bt_a_robot_between_modes_is_asked_for_its_target_and_one_whose_nodes_are_out_of_reach_is_lost(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    """Its manager answers unknown. Its preview says which: refused (its nodes out of its reach) or
+    waiting for nodes to appear: not there for the fleet; possible: its nodes answer between modes,
+    so the fleet takes it for active in no mode and asks it for the mode it wants."""
+    scripted = scripted_sm_bt
+    runtime = _fleet(tmp_path, extra="")
+    try:
+        manager = runtime.manager
+        scripted.preview = (True, ["amcl to appear"])
+        time.sleep(SETTLE)
+        assert not manager.observation("robot1").seen
+        scripted.preview = (True, [])
+        wait_until(lambda: manager.observation("robot1").seen, 5.0, "robot1 never taken for between modes")
+        assert str(manager.actual("robot1")) == "active", manager.actual("robot1")
+        _done(runtime, "FAST")
+        assert scripted.requests == ["request_change f_performance_mode [fleet]"]
+        scripted.preview = (False, [])
+        scripted.move(State.UNKNOWN, "unknown")
+        wait_until(lambda: manager.actual("robot1").state is State.UNKNOWN, 5.0, "robot1 never lost")
+        assert manager.observation("robot1").gone == "the manager of robot1 does not know where /robot1/pilot is"
     finally:
         runtime.close()
