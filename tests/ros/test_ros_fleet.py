@@ -44,17 +44,25 @@ def fleet() -> Iterator[RosRuntime]:
     runtime.close()
 
 
+def _robots(start_manager: Callable[..., ManagerProcess], node_processes: Starter, fleet: RosRuntime,
+            robot1: tuple[str, ...] = ()) -> dict[str, ManagerProcess]:
+    """robot1 and robot2, each the pilot's nodes (inactive; ``robot1``: more options of its nodes) and
+    its own manager, read by the fleet."""
+    managers = {name: start_manager("--namespace", f"/{name}") for name in ("robot1", "robot2")}
+    for name in managers:
+        node_processes("pilot", "--namespace", f"/{name}", "--state", "inactive", *(robot1 if name == "robot1" else ()))
+    for manager in managers.values():
+        manager.ready()
+    wait_until(lambda: all(fleet.manager.actual(r).state is State.INACTIVE for r in managers), 20.0,
+               "the fleet never read its robots")
+    return managers
+
+
 def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
         fleet: RosRuntime) -> None:
-    managers = {name: start_manager("--namespace", f"/{name}") for name in ("robot1", "robot2")}
-    for name in managers:
-        node_processes("pilot", "--namespace", f"/{name}", "--state", "inactive")
-    for manager in managers.values():
-        manager.ready()
+    managers = _robots(start_manager, node_processes, fleet)
     fleet_manager = fleet.manager
-    wait_until(lambda: all(fleet_manager.actual(r).state is State.INACTIVE for r in managers), 20.0,
-               "the fleet never read its robots")
     up = fleet_manager.change_mode("fleet", "__DEFAULT__")
     wait_until(lambda: up.done, 20.0, "the fleet's bring-up did not end")
     assert up.succeeded, up.reason
@@ -136,14 +144,8 @@ def test_a_robots_failed_request_fails_the_fleets_at_once_with_the_robots_reason
     """robot1's amcl fails its activation: robot1's own request fails, and the fleet's with it, its
     reason the robot's, long before the fleet's request timeout (20 s). The robot's log names the
     fleet as the requester."""
-    managers = {name: start_manager("--namespace", f"/{name}") for name in ("robot1", "robot2")}
-    for name in managers:
-        node_processes("pilot", "--namespace", f"/{name}", "--state", "inactive")
-    for manager in managers.values():
-        manager.ready()
+    managers = _robots(start_manager, node_processes, fleet)
     fleet_manager = fleet.manager
-    wait_until(lambda: all(fleet_manager.actual(r).state is State.INACTIVE for r in managers), 20.0,
-               "the fleet never read its robots")
     parameter = Parameter(name="sim.fail_next", value=ParameterValue(type=ParameterType.PARAMETER_STRING,
                                                                       string_value="activate"))
     answer = ros_context.call(SetParameters, "/robot1/amcl/set_parameters", SetParameters.Request(
@@ -169,14 +171,8 @@ def test_a_robot_manager_killed_mid_change_fails_the_fleets_at_once_and_a_new_on
     laser). The operator starts a new manager (its request numbers start again at 1), which knows no
     mode of its system and has no target, while its nodes answer: the fleet tells that from nodes
     out of its reach, and restores robot1's target through it."""
-    managers = {name: start_manager("--namespace", f"/{name}") for name in ("robot1", "robot2")}
-    node_processes("pilot", "--namespace", "/robot1", "--state", "inactive", "--transition-delay", "0.5")
-    node_processes("pilot", "--namespace", "/robot2", "--state", "inactive")
-    for manager in managers.values():
-        manager.ready()
+    managers = _robots(start_manager, node_processes, fleet, robot1=("--transition-delay", "0.5"))
     fleet_manager = fleet.manager
-    wait_until(lambda: all(fleet_manager.actual(r).state is State.INACTIVE for r in managers), 20.0,
-               "the fleet never read its robots")
     night = fleet_manager.change_mode("fleet", "NIGHT")
     robot1 = managers["robot1"]
     wait_until(lambda: robot1.lines("change_mode pilot f_energy_saving_mode started [fleet]"), 10.0,

@@ -17,6 +17,7 @@ is an older sm-bt manager: told as a warning, probed at the fast pace, its event
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
@@ -35,6 +36,7 @@ from sm_bt_msgs.srv import PreviewChange, RequestChange
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode, GetMode
 
+from sm_bt.engine.requests import Request
 from sm_bt.model import load_model
 from sm_bt.model.states import State
 from sm_bt.ros.manager_node import MODE_EVENT_LEASE, OUTCOMES
@@ -242,6 +244,26 @@ def fleet(tmp_path: Path) -> Iterator[RosRuntime]:
     runtime.close()
 
 
+@contextlib.contextmanager
+def _reading(scripted: ScriptedManager, tmp_path: Path, **backend: float) -> Iterator[RosRuntime]:
+    """A fleet over the scripted sm-bt robot, active in f_normal_mode, once it has read it."""
+    scripted.move(State.ACTIVE, "f_normal_mode")
+    runtime = _fleet(tmp_path, extra="", **backend)
+    try:
+        wait_until(lambda: str(runtime.manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+        yield runtime
+    finally:
+        runtime.close()
+
+
+def _fails(runtime: RosRuntime, mode: str, *, within: float, after: float = 0.0) -> Request:
+    """The fleet's request for ``mode``, failed between ``after`` and ``within`` s after it was made."""
+    request = runtime.manager.change_mode("fleet", mode)
+    took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+    assert after <= took < within and not request.succeeded, (took, request)
+    return request
+
+
 def _done(runtime: RosRuntime, mode: str) -> None:
     request = runtime.manager.change_mode("fleet", mode)
     wait_until(lambda: request.done, 15.0, f"fleet {mode} did not end")
@@ -396,65 +418,39 @@ def test_served_by_sm_bt_a_change_is_done_when_the_robots_request_ends_told_befo
     """Asked through request_change, as the fleet: done with the robot's request, whose outcome may
     come before the answer that numbers it (two channels)."""
     scripted = scripted_sm_bt
-    scripted.move(State.ACTIVE, "f_normal_mode")
-    runtime = _fleet(tmp_path, extra="")
-    try:
-        manager = runtime.manager
-        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+    with _reading(scripted, tmp_path) as runtime:
         _done(runtime, "FAST")
         scripted.outcome_first = True
         _done(runtime, "__DEFAULT__")
         assert scripted.requests == ["request_change f_performance_mode [fleet]",
                                      "request_change f_normal_mode [fleet]"]
-    finally:
-        runtime.close()
 
 
 def test_served_by_sm_bt_a_robots_failed_or_refused_request_fails_the_fleets_at_once_with_its_reason(
         scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
     scripted = scripted_sm_bt
-    scripted.move(State.ACTIVE, "f_normal_mode")
-    runtime = _fleet(tmp_path, extra="")  # its request timeout: 10 s
-    try:
-        manager = runtime.manager
-        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+    with _reading(scripted, tmp_path) as runtime:  # its request timeout: 10 s
         scripted.outcome = "failed"
-        request = manager.change_mode("fleet", "FAST")
-        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
-        assert took < 3.0 and not request.succeeded
+        request = _fails(runtime, "FAST", within=3.0)
         assert request.reason == ("robot1: change_mode f_performance_mode failed: its manager's request #1 failed: "
                                   "amcl: activate failed"), request.reason
         scripted.refusal = "pilot is held in active.f_normal_mode by safety (priority 90)"
-        request = manager.change_mode("fleet", "FAST")
-        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
-        assert took < 3.0 and not request.succeeded
+        request = _fails(runtime, "FAST", within=3.0)
         assert request.reason == (
             "robot1: change_mode f_performance_mode failed: the manager of robot1 refused mode f_performance_mode: "
             "pilot is held in active.f_normal_mode by safety (priority 90)"), request.reason
-    finally:
-        runtime.close()
 
 
 def test_served_by_sm_bt_a_request_whose_outcome_never_comes_fails_at_the_outcome_timeout_or_when_out_of_reach(
         scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
     scripted = scripted_sm_bt
-    scripted.move(State.ACTIVE, "f_normal_mode")
-    runtime = _fleet(tmp_path, extra="", outcome_timeout=1.5)
-    try:
-        manager = runtime.manager
-        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
+    with _reading(scripted, tmp_path, outcome_timeout=1.5) as runtime:
         scripted.outcome = None
-        request = manager.change_mode("fleet", "FAST")
-        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
-        assert 1.5 <= took < 4.0 and not request.succeeded
+        request = _fails(runtime, "FAST", within=4.0, after=1.5)
         assert request.reason == ("robot1: change_mode f_performance_mode failed: its manager told no outcome of its "
                                   "request #1 (change_mode f_performance_mode) within 1.5 s"), request.reason
-    finally:
-        runtime.close()
-    runtime = _fleet(tmp_path, extra="")  # the outcome timeout: 60 s
-    try:
+    with _reading(scripted, tmp_path) as runtime:  # the outcome timeout: 60 s
         manager = runtime.manager
-        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 10.0, "robot1 never read")
         request = manager.change_mode("fleet", "FAST")
         wait_until(lambda: "request_change f_performance_mode [fleet]" in scripted.requests[1:], 5.0, "never asked")
         scripted.running.clear()  # hung: out of reach a few probes later, and what it owes fails
@@ -468,8 +464,6 @@ def test_served_by_sm_bt_a_request_whose_outcome_never_comes_fails_at_the_outcom
         scripted.outcome = "succeeded"
         wait_until(lambda: manager.actual("robot1").state is State.ACTIVE, 5.0, "robot1 never read again")
         _done(runtime, "FAST")
-    finally:
-        runtime.close()
 
 
 def test_served_by_sm_bt_a_robot_between_modes_is_asked_for_its_target_and_one_whose_nodes_are_out_of_reach_is_lost(
