@@ -31,7 +31,7 @@ the reference's ``mode_manager``. :class:`RemoteBackend` speaks to it as any cli
 * liveliness (sm-bt manager): its ``mode_event`` offers a DDS liveliness lease
   (:mod:`~sm_bt.ros.remote_liveliness`), and DDS tells the fleet, from its own threads, when no
   assertion came for ``liveness_timeout`` s (the process stopped, exited or was cut off): the same
-  verdict, ``LIVELINESS_GRACE`` s later. While DDS vouches for it, a robot is probed every
+  verdict (:mod:`~sm_bt.ros.remote_probes`). While DDS vouches for it, a robot is probed every
   ``slow_probe_interval`` s (3 s; a probe costs this process about a millisecond of Python), which
   tells a manager whose Python hangs while its DDS threads live: a probe unanswered for the window
   is asked again at once, and a fast interval later it is out of reach. Out of reach, with a change
@@ -71,18 +71,13 @@ from sm_bt.model.remote_parts import MixedModel, check_fleet
 from sm_bt.model.states import State
 from sm_bt.model.types import DEFAULT_MODE, FLEET_REQUESTER, REMOTE_MODE, Model, ParamValue
 from sm_bt.ros.manager_node import OUTCOMES
-from sm_bt.ros.peers import SLACK, Link, state_of
+from sm_bt.ros.peers import Link, state_of
 from sm_bt.ros.remote_liveliness import Liveliness, liveliness_qos
+from sm_bt.ros.remote_probes import RobotProbes
 from sm_bt.ros.remote_requests import RobotRequests
 from sm_bt.ros.remote_robots import Robot, RobotCalls
 
 log = logging.getLogger("sm_bt.ros.remote_parts")
-
-#: A liveliness lost is judged this much later. Right after this process stood still (stopped,
-#: starved), DDS's lease timer may fire before the assertions that waited in its sockets are read:
-#: seen over UDP after stalls of 1-5 s, the writer alive again 1-5 ms after its loss, while the clock
-#: had not always seen the stall yet (it sees one only at a timer due meanwhile).
-LIVELINESS_GRACE = 0.05
 
 #: Volatile: it matches sm-bt manager's latched writers and the reference's volatile ones alike;
 #: what came before is read with get_state/get_mode instead.
@@ -113,6 +108,10 @@ class RemoteBackend:
         self._lock = threading.Lock()
         self._calls = RobotCalls(self._clock, self._lock, call_timeout)
         self._listener: BackendListener | None = None
+        self._probes = RobotProbes(self._clock, self._lock, self._calls, probe_interval=probe_interval,
+                                   liveness_timeout=liveness_timeout, slow_probe_interval=slow_probe_interval,
+                                   listening=lambda: self._listener is not None, answered=self._state_answer,
+                                   read=self._read_mode, unanswered=self._unanswered)
         self._robots: dict[str, Robot] = {}
         for part in model.nodes:
             assert part.remote is not None
@@ -147,8 +146,8 @@ class RemoteBackend:
             for robot in leased:
                 robot.liveliness = self._liveliness.subscribe(
                     f"{robot.fqn}/mode_event", liveliness_qos(self.liveness_timeout),
-                    SubscriptionEventCallbacks(liveliness=functools.partial(self._lively, robot),
-                                               incompatible_qos=functools.partial(self._no_lease, robot),
+                    SubscriptionEventCallbacks(liveliness=functools.partial(self._probes.lively, robot),
+                                               incompatible_qos=functools.partial(self._probes.no_lease, robot),
                                                use_default_callbacks=False))
             self._liveliness.start()
         for robot in robots:
@@ -165,7 +164,7 @@ class RemoteBackend:
             robot.subscriptions.append(self._node.create_subscription(
                 RequestOutcome, f"{robot.fqn}/request_outcome", robot.requests.ended, OUTCOMES))
         with self._lock:
-            self._schedule(robot, 0.0)
+            self._probes.schedule(robot, 0.0)
 
     def detach(self) -> None:
         with self._lock:
@@ -265,108 +264,9 @@ class RemoteBackend:
         with self._lock:
             robot.asked = mode
             if robot.lively:  # probed at the fast pace until its manager reports the mode
-                self._schedule(robot, self.probe_interval)
+                self._probes.schedule(robot, self.probe_interval)
 
     # -- liveness and reading ------------------------------------------------------------------------------
-
-    def _schedule(self, robot: Robot, delay: float) -> None:
-        """(With the lock held.) Its next probe in ``delay`` s, instead of the one planned."""
-        if robot.timer is not None:
-            robot.timer.cancel()
-        robot.generation += 1
-        generation = robot.generation
-        robot.timer = self._clock.call_later(delay, lambda: self._probe(robot, generation))
-
-    def _probe(self, robot: Robot, generation: int) -> None:
-        with self._lock:
-            if self._listener is None or generation != robot.generation:
-                return
-            asking = not robot.probing
-            robot.probing = True
-            sent = self._clock.now()
-            events = robot.events
-            reading = robot.asked if robot.present and robot.state is State.ACTIVE else None
-            # The verdict falls due one window after the last word, not at the next probe's tick.
-            due = max(0.0, robot.last_heard + self.liveness_timeout - sent)
-            # DDS vouches for its process, it answered its last probe and owes no report: at the slow pace.
-            vouched = robot.present and robot.lively and robot.asked is None and robot.failed_at <= robot.last_heard
-            interval = self.slow_probe_interval if vouched else self.probe_interval
-            robot.timer = self._clock.call_later(interval, lambda: self._probe(robot, generation))
-        self._judge(robot)
-        if asking:
-            self._calls.call(robot, robot.get_state, GetState.Request(), "get_state (liveness)",
-                             lambda response: self._state_answer(robot, state_of(response.current_state.id), events),
-                             lambda why: self._probe_failed(robot, sent), timeout=self.liveness_timeout)
-        if reading is not None:  # a manager that sends no event (the reference, at times) is read
-            self._read_mode(robot, reading)
-        if due < self.probe_interval:
-            self._clock.call_later(due + SLACK, lambda: self._judge(robot))
-
-    def _judge(self, robot: Robot) -> None:
-        """Out of reach once nothing was heard from its manager for the window, unless DDS vouches
-        for its process (then its probes tell a hang: :meth:`_probe_failed`)."""
-        with self._lock:
-            # Not before this process last stood still itself: it heard nothing meanwhile.
-            heard = max(robot.last_heard, self._clock.resumed)
-            silent = (self._listener is not None and robot.present and not robot.lively
-                      and self._clock.now() - heard >= self.liveness_timeout)
-            if silent:
-                robot.present = False
-        if silent:
-            self._unanswered(robot, "it exited, or the network is cut")
-
-    def _lively(self, robot: Robot, info: Any) -> None:
-        """(The liveliness thread.) DDS's word on its manager's lease (``info``: a
-        QoSLivelinessChangedInfo): ``alive_count`` writers of its ``mode_event`` assert it. None
-        left: judged :data:`LIVELINESS_GRACE` s later (its last word came at least a window ago,
-        unless an answer came later), and probed at the fast pace; back: heard, and read afresh at once if it was out of
-        reach."""
-        alive = int(info.alive_count)
-        with self._lock:
-            if self._listener is None:
-                return
-            was, lively = robot.lively, alive > 0
-            robot.lively = lively
-            if lively and not was:
-                robot.last_heard = max(robot.last_heard, self._clock.now())
-                if not robot.present:
-                    self._schedule(robot, 0.0)
-            elif was and not lively:  # the probe judges it, on the clock's thread (after its late timers)
-                self._schedule(robot, LIVELINESS_GRACE)
-        if lively != was:
-            log.debug("%s: its manager's liveliness %s (%d alive)", robot.part, "back" if lively else "lost", alive)
-
-    def _no_lease(self, robot: Robot, info: Any) -> None:
-        """(The liveliness thread.) A writer of its ``mode_event`` offers no lease the fleet can use."""
-        log.warning("%s: a writer of %s/mode_event offers no liveliness lease of at most %g s (the reference, or "
-                    "an older sm-bt manager?): its manager is probed every %g s", robot.part, robot.fqn,
-                    self.liveness_timeout, self.probe_interval)
-
-    def _probe_failed(self, robot: Robot, sent: float) -> None:
-        """A probe sent at ``sent`` unanswered (or no manager serves it). While DDS vouches for its
-        process, a probe unanswered for the window is asked again at once (out of reach: it is about
-        to answer, busy with what piled up while it stood still); in reach, if still nothing has come
-        a fast probe interval later, its manager is out of reach (hung, its DDS threads alive)."""
-        with self._lock:
-            robot.probing = False
-            timed_out = self._clock.now() - max(sent, self._clock.resumed) >= self.liveness_timeout - SLACK
-            doubted = robot.present and robot.lively and robot.last_heard < sent
-            suspect = doubted and timed_out
-            if doubted:
-                robot.failed_at = max(robot.failed_at, sent)
-            if robot.lively and timed_out and (suspect or not robot.present):
-                self._schedule(robot, 0.0)
-        if suspect:
-            self._clock.call_later(self.probe_interval, lambda: self._hung(robot, sent))
-
-    def _hung(self, robot: Robot, sent: float) -> None:
-        with self._lock:
-            hung = (self._listener is not None and robot.present and robot.lively and robot.last_heard < sent
-                    and self._clock.now() - max(sent, self._clock.resumed) >= self.liveness_timeout)
-            if hung:
-                robot.present = False
-        if hung:
-            self._unanswered(robot, "DDS still sees its process: it hangs?")
 
     def _unanswered(self, robot: Robot, why: str) -> None:
         reason = f"no answer from the manager of {robot.part} ({robot.fqn}) for {self.liveness_timeout:g} s ({why})"
