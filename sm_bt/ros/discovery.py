@@ -1,5 +1,6 @@
 """Discovery: a node of the model that shows up on the ROS graph is asked for its live state and
-parameters before it is reported, and one that leaves the graph is reported gone.
+parameters before it is reported, and one that leaves the graph is reported gone (unless this
+process has just stood still itself: :data:`GRAPH_CATCH_UP`).
 
 The graph is looked at every ``poll_interval`` s while a node is missing, every
 ``idle_poll_interval`` s once all are present (``graph_interval`` for the services of present
@@ -31,6 +32,11 @@ from sm_bt.ros.parameters import from_parameter_value
 from sm_bt.ros.peers import Peer, Presence, state_of
 
 log = logging.getLogger("sm_bt.ros.backend")
+
+#: Seconds after this process last stood still (:attr:`~sm_bt.engine.clock.WallClock.resumed`) in
+#: which a node missing from the graph is looked at again rather than taken for gone: the graph
+#: catches up then (seen after a 1.8 s stop under load: every node of a process missing for 0.1 s).
+GRAPH_CATCH_UP = 1.0
 
 
 class Discovery:
@@ -142,7 +148,9 @@ class Discovery:
                 if not lifecycle_ready:
                     peer.lifecycle_since = None
         if presence is Presence.PRESENT:
-            if gone:
+            if gone and now - getattr(self._clock, "resumed", float("-inf")) < GRAPH_CATCH_UP:
+                log.debug("%s missing from the graph right after this process stood still: looked at again", peer.fqn)
+            elif gone:
                 self._vanish((peer, f"node {peer.fqn} left the ROS graph"))
             elif relisted:
                 self._acquire(peer, lifecycle=True)
