@@ -346,11 +346,12 @@ class Ping(NamedTuple):
 
 
 class HostNodeProcess(NodeProcess):
-    """:class:`~ros_processes.NodeProcess` on the robot side of ``hosts``."""
+    """:class:`~ros_processes.NodeProcess` on the robot side of ``hosts`` (or on ``side``)."""
 
-    def __init__(self, hosts: Hosts, model: str, *args: str, ready_timeout: float = READY_TIMEOUT) -> None:
+    def __init__(self, hosts: Hosts, model: str, *args: str, ready_timeout: float = READY_TIMEOUT,
+                 side: str = "robot") -> None:
         super().__init__(model, *args, ready_timeout=ready_timeout)
-        self.command = hosts.command("robot", *self.command)
+        self.command = hosts.command(side, *self.command)
         self._hosts = hosts
 
     def start(self) -> NodeProcess:
@@ -443,16 +444,7 @@ class Hosts:
         self.log_dir.mkdir()
         existing = namespaces()
         for name in self.namespaces.values():
-            if name in existing:  # a leftover of a dead process with this PID: it has our name, not a live run's
-                ip("netns", "del", name)
-            ip("netns", "add", name)
-            self._made.append(name)
-            # No IPv6 (router solicitations, MLD, neighbour discovery): fewer frames that are only noise.
-            subprocess.run(["ip", "netns", "exec", name, "sh", "-c",
-                            "echo 1 > /proc/sys/net/ipv6/conf/all/disable_ipv6; "
-                            "echo 1 > /proc/sys/net/ipv6/conf/default/disable_ipv6"],
-                           check=True, capture_output=True, timeout=30)
-            ip("-n", name, "link", "set", "lo", "up")
+            self._add_namespace(name, existing)
         relay = self.namespaces["relay"]
         for side in SIDES:
             namespace = self.namespaces[side]
@@ -468,6 +460,20 @@ class Hosts:
         self.processes.append(self.relay.process)
         self._helpers.append(self.relay)
         self.relay.expect("READY", HELPER_READY_TIMEOUT)
+
+    def _add_namespace(self, name: str, existing: set[str]) -> None:
+        """Make namespace ``name`` (recorded for :meth:`close`), with no IPv6 and ``lo`` up; ``existing``:
+        the names ``ip netns list`` showed before."""
+        if name in existing:  # a leftover of a dead process with this PID: it has our name, not a live run's
+            ip("netns", "del", name)
+        ip("netns", "add", name)
+        self._made.append(name)
+        # No IPv6 (router solicitations, MLD, neighbour discovery): fewer frames that are only noise.
+        subprocess.run(["ip", "netns", "exec", name, "sh", "-c",
+                        "echo 1 > /proc/sys/net/ipv6/conf/all/disable_ipv6; "
+                        "echo 1 > /proc/sys/net/ipv6/conf/default/disable_ipv6"],
+                       check=True, capture_output=True, timeout=30)
+        ip("-n", name, "link", "set", "lo", "up")
 
     def close(self) -> None:
         """Stop every process started here (by PID: SIGINT, SIGKILL 3 s later), delete the namespaces
@@ -577,9 +583,10 @@ class Hosts:
         watch.expect("READY", HELPER_READY_TIMEOUT)
         return watch
 
-    def ping(self, count: int = 20, interval: float = 0.05, wait: float = 2.0, side: str = "robot") -> Ping:
-        """ICMP echo from ``side`` to the other side (``tests/support/host_agent.py ping``)."""
-        other = self.addresses["brain" if side == "robot" else "robot"]
+    def ping(self, count: int = 20, interval: float = 0.05, wait: float = 2.0, side: str = "robot",
+             to: str | None = None) -> Ping:
+        """ICMP echo from ``side`` to the other side, or to host ``to`` (``tests/support/host_agent.py ping``)."""
+        other = self.addresses[to if to is not None else "brain" if side == "robot" else "robot"]
         limit = count * interval + wait + 15.0
         code, out, err, timed_out = self._run(self.command(side, sys.executable, str(AGENT), "ping", other, "--count",
                                                            str(count), "--interval", str(interval), "--wait",
