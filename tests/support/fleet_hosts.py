@@ -40,15 +40,12 @@ from pathlib import Path
 
 from hosts import (
     _ROUND_TRIP,
-    FAST_DDS_PROFILE,
     Helper,
-    HostManagerProcess,
     HostNodeProcess,
     Hosts,
     Ping,
     _what,
     ip,
-    namespaces,
     require_root,
     stop_processes,
 )
@@ -94,15 +91,7 @@ class FleetHosts(Hosts):
         return self
 
     def _make(self) -> None:
-        self.directory = Path(tempfile.mkdtemp(prefix=f"smbt-fleet-hosts-{self.tag}-"))
-        self._made_directory = True
-        self.profile = self.directory / "fastdds_udpv4_only.xml"
-        self.log_dir = self.directory / "roslog"
-        self.profile.write_text(FAST_DDS_PROFILE)
-        self.log_dir.mkdir()
-        existing = namespaces()
-        for name in self.namespaces.values():
-            self._add_namespace(name, existing)
+        self._make_namespaces("smbt-fleet-hosts")
         switch = self.namespaces[SWITCH]
         ip("-n", switch, "link", "add", BRIDGE, "type", "bridge", "stp_state", "0", "mcast_snooping", "0")
         ip("-n", switch, "link", "set", BRIDGE, "up")
@@ -143,15 +132,7 @@ class FleetHosts(Hosts):
                 ready_timeout: float = READY_TIMEOUT) -> ManagerProcess:
         """``python -m sm_bt.cli manager MODEL ARGS`` on host ``side``: serving already (``wait``, within
         ``ready_timeout`` s), or starting in the background (then call ``ready()`` on it)."""
-        process = HostManagerProcess(self, model, *args, side=side)
-        process.ready_timeout = ready_timeout
-        self._managers.append(process)
-        if wait:
-            process.start()
-            self._check_exec(process)
-        else:
-            process.launch()
-        return process
+        return super().manager(model, *args, wait=wait, side=side, ready_timeout=ready_timeout)
 
     def helper(self, name: str, *argv: str, side: str = BRAIN) -> Helper:
         """``ARGV`` on host ``side`` as a :class:`~hosts.Helper` (lines in, lines out), stopped at ``close()``."""

@@ -436,15 +436,7 @@ class Hosts:
         return self
 
     def _make(self) -> None:
-        self.directory = Path(tempfile.mkdtemp(prefix=f"smbt-hosts-{self.tag}-"))
-        self._made_directory = True
-        self.profile = self.directory / "fastdds_udpv4_only.xml"
-        self.log_dir = self.directory / "roslog"
-        self.profile.write_text(FAST_DDS_PROFILE)
-        self.log_dir.mkdir()
-        existing = namespaces()
-        for name in self.namespaces.values():
-            self._add_namespace(name, existing)
+        self._make_namespaces("smbt-hosts")
         relay = self.namespaces["relay"]
         for side in SIDES:
             namespace = self.namespaces[side]
@@ -460,6 +452,18 @@ class Hosts:
         self.processes.append(self.relay.process)
         self._helpers.append(self.relay)
         self.relay.expect("READY", HELPER_READY_TIMEOUT)
+
+    def _make_namespaces(self, prefix: str) -> None:
+        """The temp dir (``prefix``), its Fast DDS profile and log dir, and every namespace of ``namespaces``."""
+        self.directory = Path(tempfile.mkdtemp(prefix=f"{prefix}-{self.tag}-"))
+        self._made_directory = True
+        self.profile = self.directory / "fastdds_udpv4_only.xml"
+        self.log_dir = self.directory / "roslog"
+        self.profile.write_text(FAST_DDS_PROFILE)
+        self.log_dir.mkdir()
+        existing = namespaces()
+        for name in self.namespaces.values():
+            self._add_namespace(name, existing)
 
     def _add_namespace(self, name: str, existing: set[str]) -> None:
         """Make namespace ``name`` (recorded for :meth:`close`), with no IPv6 and ``lo`` up; ``existing``:
@@ -528,11 +532,14 @@ class Hosts:
         self._check_exec(process)
         return process
 
-    def manager(self, model: str, *args: str, wait: bool = True, side: str = "brain") -> ManagerProcess:
+    def manager(self, model: str, *args: str, wait: bool = True, side: str = "brain",
+                ready_timeout: float | None = None) -> ManagerProcess:
         """``python -m sm_bt.cli manager MODEL ARGS`` on ``side`` (a robot's own manager, in a fleet, is
-        on the robot's): serving already (``wait``), or starting in the background (then call
-        ``ready()`` on it)."""
+        on the robot's): serving already (``wait``, within ``ready_timeout`` s if given), or starting in
+        the background (then call ``ready()`` on it)."""
         process = HostManagerProcess(self, model, *args, side=side)
+        if ready_timeout is not None:
+            process.ready_timeout = ready_timeout
         self._managers.append(process)
         if wait:
             process.start()
