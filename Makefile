@@ -50,6 +50,7 @@ test:
 # a cut and a heal as the CLI sees them from the brain side (tests/e2e/stress_hosts.py),
 # and as many between a fleet's manager and a robot's (tests/e2e/stress_fleet_partitions.py),
 # a fleet of ten robots each in a network namespace of its own, its goals measured (tests/e2e/stress_fleet_hosts.py),
+# a robot's manager killed during a fleet's change and started again (tests/e2e/stress_fleet_restarts.py),
 # nodes whose transitions take 30 s brought up over ROS 2, and a fleet over robots whose nodes take 10 s
 # (tests/e2e/stress_long_transitions.py), and
 # 10,000 interleavings of subscriptions and changes on the manager's topics (tests/ros/test_ros_topics_property.py).
@@ -62,7 +63,7 @@ stress: $(STAMP)
 		tests/engine/test_holds.py tests/analysis/test_analysis.py tests/model/test_model_fuzz.py \
 		tests/sim/test_sim_fleet.py tests/e2e/stress_partitions.py tests/e2e/stress_fleet_partitions.py \
 		tests/e2e/stress_long_transitions.py tests/ros/test_ros_topics_property.py tests/e2e/stress_hosts.py \
-		tests/e2e/stress_fleet_hosts.py
+		tests/e2e/stress_fleet_hosts.py tests/e2e/stress_fleet_restarts.py
 
 # The performance goals (docs/performance.md): a table with each goal, build/bench/results.json
 # and build/bench/scaling.png; exit status 1 if a goal is not met. About 5-6 minutes on 2 cores.

@@ -374,7 +374,7 @@ def test_a_rule_with_the_condition_of_an_earlier_one_is_shadowed(tmp_path: Path)
                                            faults=0)
 
 
-@examples(100, stress=2000)
+@examples(50, stress=2000)
 @given(generated_models())
 def test_any_model_is_analysed_and_every_finding_has_its_file_and_line(generated: GeneratedModel) -> None:
     model = generated.load()

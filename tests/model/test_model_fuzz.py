@@ -32,7 +32,7 @@ from model_fuzz import (
 
 from sm_bt.model import load_model_text
 
-DOCUMENTS, MUTATIONS = 500, 1500  # files of each campaign in `make test`; 50,000 each in `make stress`
+DOCUMENTS, MUTATIONS = 250, 750  # files of each campaign in `make test`; 50,000 each in `make stress`
 
 #: The campaigns that ran in this process (the tally is the process's: run alone, or where a worker
 #: did not get the whole module, the test of what they reached runs what is missing).

@@ -7,61 +7,35 @@ from __future__ import annotations
 import os
 import signal
 import time
-from collections.abc import Callable, Iterator
-from pathlib import Path
+from collections.abc import Callable
 
 import pytest
-from lifecycle_msgs.msg import Transition
-from lifecycle_msgs.srv import ChangeState, GetState
+from fleet_robots import FLEET, fleet_fixture, robots  # noqa: F401 (the fixture)
+from lifecycle_msgs.srv import GetState
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from ros_processes import ManagerProcess, RosContext, Starter, wait_until
 from system_modes_msgs.srv import ChangeMode, GetMode
 
 from sm_bt.engine.events import EventKind
-from sm_bt.model import load_model
 from sm_bt.model.states import State
 from sm_bt.ros.runtime import RosRuntime
 
 pytestmark = pytest.mark.ros
 
-#: Two robots (/robot1/pilot, /robot2/pilot) under a fleet of __DEFAULT__ and NIGHT: the model
-#: of docs/model-format.md, "Remote parts".
-FLEET = Path(__file__).resolve().parents[2] / "models" / "fleet.yaml"
 #: The fleet's liveness window (RemoteBackend's default), and what the verdict
 #: may take beyond them on a loaded machine.
 WINDOW, LATENCY = 0.9, 0.3
 #: RemoteBackend's default pace of the probes of a robot whose liveliness DDS vouches for.
 SLOW_PROBES = 3.0
-#: lifecycle_msgs/msg/State's ids.
-INACTIVE, ACTIVE = 2, 3
-
-
-@pytest.fixture
-def fleet() -> Iterator[RosRuntime]:
-    runtime = RosRuntime(load_model(FLEET), node_name="fleet_manager", manager_options={"request_timeout": 20.0})
-    yield runtime
-    runtime.close()
-
-
-def _robots(start_manager: Callable[..., ManagerProcess], node_processes: Starter, fleet: RosRuntime,
-            robot1: tuple[str, ...] = ()) -> dict[str, ManagerProcess]:
-    """robot1 and robot2, each the pilot's nodes (inactive; ``robot1``: more options of its nodes) and
-    its own manager, read by the fleet."""
-    managers = {name: start_manager("--namespace", f"/{name}") for name in ("robot1", "robot2")}
-    for name in managers:
-        node_processes("pilot", "--namespace", f"/{name}", "--state", "inactive", *(robot1 if name == "robot1" else ()))
-    for manager in managers.values():
-        manager.ready()
-    wait_until(lambda: all(fleet.manager.actual(r).state is State.INACTIVE for r in managers), 20.0,
-               "the fleet never read its robots")
-    return managers
+#: lifecycle_msgs/msg/State's id.
+INACTIVE = 2
 
 
 def test_a_fleet_drives_robots_through_their_managers_and_tells_one_cut_off(
         start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
         fleet: RosRuntime) -> None:
-    managers = _robots(start_manager, node_processes, fleet)
+    managers = robots(start_manager, node_processes, fleet)
     fleet_manager = fleet.manager
     up = fleet_manager.change_mode("fleet", "__DEFAULT__")
     wait_until(lambda: up.done, 20.0, "the fleet's bring-up did not end")
@@ -144,7 +118,7 @@ def test_a_robots_failed_request_fails_the_fleets_at_once_with_the_robots_reason
     """robot1's amcl fails its activation: robot1's own request fails, and the fleet's with it, its
     reason the robot's, long before the fleet's request timeout (20 s). The robot's log names the
     fleet as the requester."""
-    managers = _robots(start_manager, node_processes, fleet)
+    managers = robots(start_manager, node_processes, fleet)
     fleet_manager = fleet.manager
     parameter = Parameter(name="sim.fail_next", value=ParameterValue(type=ParameterType.PARAMETER_STRING,
                                                                       string_value="activate"))
@@ -160,41 +134,3 @@ def test_a_robots_failed_request_fails_the_fleets_at_once_with_the_robots_reason
     assert "amcl: activate failed" in night.reason, night.reason
     assert took < 10.0, f"the fleet's request failed {took:.1f} s after it was made"
     assert "change_mode pilot f_energy_saving_mode started [fleet]" in managers["robot1"].stderr
-
-
-def test_a_robot_manager_killed_mid_change_fails_the_fleets_at_once_and_a_new_one_is_taken_on(
-        start_manager: Callable[..., ManagerProcess], node_processes: Starter, ros_context: RosContext,
-        fleet: RosRuntime) -> None:
-    """robot1's manager is killed while its slow nodes take their steps for the fleet: the fleet's
-    request fails within the liveness window, not at its timeout. Its nodes are left between modes
-    (amcl, asked directly, deactivates: no mode of the pilot has it inactive beside an active
-    laser). The operator starts a new manager (its request numbers start again at 1), which knows no
-    mode of its system and has no target, while its nodes answer: the fleet tells that from nodes
-    out of its reach, and restores robot1's target through it."""
-    managers = _robots(start_manager, node_processes, fleet, robot1=("--transition-delay", "0.5"))
-    fleet_manager = fleet.manager
-    night = fleet_manager.change_mode("fleet", "NIGHT")
-    robot1 = managers["robot1"]
-    wait_until(lambda: robot1.lines("change_mode pilot f_energy_saving_mode started [fleet]"), 10.0,
-               "robot1's manager never started the fleet's request")
-    assert robot1.process is not None
-    robot1.process.kill()
-    killed = time.monotonic()
-    wait_until(lambda: night.done, 10.0, "the fleet's request did not end")
-    took = time.monotonic() - killed
-    assert not night.succeeded and "no answer from the manager of robot1" in night.reason, night.reason
-    assert took <= WINDOW + 2 * LATENCY, f"the fleet's request failed {took:.2f} s after robot1's manager was killed"
-    assert fleet_manager.actual("robot1").state is State.UNKNOWN
-
-    def amcl() -> int:
-        return int(ros_context.call(GetState, "/robot1/amcl/get_state", GetState.Request(), 5.0).current_state.id)
-
-    wait_until(lambda: amcl() == ACTIVE, 10.0, "robot1's amcl never active")
-    deactivate = ChangeState.Request(transition=Transition(id=Transition.TRANSITION_DEACTIVATE))
-    assert ros_context.call(ChangeState, "/robot1/amcl/change_state", deactivate, 10.0).success
-
-    again = start_manager("--namespace", "/robot1").ready()
-    wait_until(lambda: str(fleet_manager.actual("robot1")) == "active.f_energy_saving_mode", 20.0,
-               "robot1 never restored through its new manager")
-    assert again.lines("change_mode pilot f_energy_saving_mode started [fleet]"), again.stderr[-3000:]
-    wait_until(lambda: str(fleet_manager.actual("fleet")) == "active.NIGHT", 5.0, "the fleet never NIGHT")
