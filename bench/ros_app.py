@@ -36,7 +36,7 @@ from typing import Any
 
 from bench.figures import Figure
 from bench.ros import P1_GOAL, model_text
-from bench.ros_baseline import SYSTEM, TIMEOUT, freeze_garbage, mode_values
+from bench.ros_baseline import SYSTEM, TIMEOUT, SpunClient, freeze_garbage, mode_values
 from bench.ros_baseline import confirmed as confirmed_request
 
 #: Per round and side on a full run: switches, bring-ups of each kind; rounds. ``--quick`` takes a few.
@@ -78,25 +78,19 @@ def _manager_times(model: Any, names: Sequence[str], switches: int, bring_ups: i
     return times
 
 
-class _Client:
+class _Client(SpunClient):
     """A plain rclpy client of the nodes' ``change_state`` and ``set_parameters_atomically``,
     its node spun by one executor thread throughout."""
 
     def __init__(self, names: Sequence[str]) -> None:
-        import rclpy
         from lifecycle_msgs.msg import Transition as TransitionMsg
         from lifecycle_msgs.srv import ChangeState
         from rcl_interfaces.srv import SetParametersAtomically
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
 
         from sm_bt.engine.lifecycle import Transition
 
         self.names = list(names)
-        self.context = Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("sm_bt_bench_app_client", context=self.context)
+        super().__init__("sm_bt_bench_app_client")
         self.change = {n: self.node.create_client(ChangeState, f"/{n}/change_state") for n in names}
         self.set = {n: self.node.create_client(SetParametersAtomically, f"/{n}/set_parameters_atomically")
                     for n in names}
@@ -104,17 +98,7 @@ class _Client:
         self.requests = {label: ChangeState.Request(transition=TransitionMsg(id=int(Transition[label.upper()]),
                                                                              label=label))
                          for label in ("configure", "activate", "deactivate", "cleanup")}
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._stopping = threading.Event()
-        self._thread = threading.Thread(target=self._spin, name="bench-app-client", daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        # spin_once in a loop rather than spin(): shutting an executor down under spin() can fail
-        # in its thread (see sm_bt.ros.runtime._Spinner).
-        while not self._stopping.is_set() and self.context.ok():
-            self.executor.spin_once(timeout_sec=0.05)
+        self.spin()
 
     def ready(self) -> None:
         """Wait until every service is discovered (polled: ``wait_for_service`` steps by 0.25 s)."""
@@ -200,12 +184,6 @@ class _Client:
                     lambda future, node=node: check(node, future))
         return self._await(send, len(self.names))
 
-    def close(self) -> None:
-        self._stopping.set()
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        self.context.try_shutdown()
 
 
 def _client_times(names: Sequence[str], values: dict[str, dict[str, dict[str, Any]]], switches: int,

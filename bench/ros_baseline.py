@@ -30,6 +30,45 @@ TIMEOUT = 20.0
 DRAIN = 0.03
 
 
+class SpunClient:
+    """A plain rclpy node of a context of its own, spun by one ``SingleThreadedExecutor`` thread from
+    :meth:`spin` on (once its subscriptions and clients are made) until :meth:`close`: the bench's
+    clients of the nodes and of the managers."""
+
+    def __init__(self, name: str) -> None:
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.signals import SignalHandlerOptions
+
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.context)
+        self._stopping = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def spin(self) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, name=f"{self.node.get_name()}-spin", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        # spin_once in a loop rather than spin(): shutting an executor down under spin() can fail
+        # in its thread (see sm_bt.ros.runtime._Spinner).
+        while not self._stopping.is_set() and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self._stopping.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+            self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
 class _Spinner:
     """An executor spun by a thread of its own while it is awake. The baseline's executors rest while
     the manager is measured: the instrument's work competes with the manager for two cores."""

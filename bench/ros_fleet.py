@@ -44,7 +44,8 @@ from typing import IO, Any
 
 from bench.figures import Figure
 from bench.ros import _cpu_seconds
-from bench.ros_baseline import confirmed, freeze_garbage
+from bench.ros_baseline import SpunClient, confirmed, freeze_garbage
+from bench.ros_plant import start_one
 from sm_bt.model.states import State
 from sm_bt.ros.node_process import NodesError, NodesProcess
 
@@ -119,15 +120,8 @@ class ManagerProcess(NodesProcess):
 def _start_all(processes: Sequence[NodesProcess]) -> None:
     """Start every process at once (each bounded by its ``ready_timeout``); the first failure is
     raised once all starts are over."""
-    def start(process: NodesProcess) -> BaseException | None:
-        try:
-            process.start()
-        except BaseException as error:  # returned: one failure must not hide the others' state
-            return error
-        return None
-
     with ThreadPoolExecutor(len(processes)) as pool:
-        errors = [error for error in pool.map(start, processes) if error is not None]
+        errors = [error for error in pool.map(start_one, processes) if error is not None]
     for error in errors:  # whole, with the child's stderr; the harness shows only the last line
         print(f"bench.ros_fleet: {error}", file=sys.stderr, flush=True)
     if errors:
@@ -149,24 +143,18 @@ def _stop_all(processes: Sequence[NodesProcess]) -> None:
 # -- the plain rclpy client ----------------------------------------------------------------------------
 
 
-class _Client:
+class _Client(SpunClient):
     """A plain rclpy client of the robots' managers (and of a fleet manager process): one node,
     one ``SingleThreadedExecutor`` spun by one thread throughout; every call has a timeout."""
 
     def __init__(self, robots: Sequence[str], name: str) -> None:
-        import rclpy
         from lifecycle_msgs.srv import GetState
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-        from rclpy.signals import SignalHandlerOptions
         from system_modes_msgs.msg import ModeEvent
         from system_modes_msgs.srv import ChangeMode, GetMode
 
         self.robots = list(robots)
-        self.context = Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node(name, context=self.context)
+        super().__init__(name)
         self.change_mode = {r: self.node.create_client(ChangeMode, f"/{r}/{ROBOT_SYSTEM}/change_mode") for r in robots}
         self.get_state = {r: self.node.create_client(GetState, f"/{r}/{ROBOT_SYSTEM}/get_state") for r in robots}
         self.get_mode = {r: self.node.create_client(GetMode, f"/{r}/{ROBOT_SYSTEM}/get_mode") for r in robots}
@@ -179,16 +167,7 @@ class _Client:
         self.subscriptions = [self.node.create_subscription(
             ModeEvent, f"/{r}/{ROBOT_SYSTEM}/mode_event", functools.partial(self._mode_event, r), qos)
             for r in robots]
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._stopping = threading.Event()
-        self._thread = threading.Thread(target=self._spin, name="bench-fleet-client", daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        # spin_once in a loop: shutting an executor down under spin() can fail in its thread.
-        while not self._stopping.is_set() and self.context.ok():
-            self.executor.spin_once(timeout_sec=0.05)
+        self.spin()
 
     def _mode_event(self, robot: str, message: Any) -> None:
         now = time.perf_counter()
@@ -288,12 +267,6 @@ class _Client:
         except ValueError:
             return State.UNKNOWN, str(mode)
 
-    def close(self) -> None:
-        self._stopping.set()
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        self.context.try_shutdown()
 
 
 # -- the fleet's side --------------------------------------------------------------------------------

@@ -98,12 +98,13 @@ def _start(processes: list[NodesProcess]) -> None:
     """Start every node process at once (one after the other took about as long each, on 2 cores);
     each start is bounded by its ``ready_timeout``. The first failure is raised once all are done."""
     with ThreadPoolExecutor(len(processes)) as pool:
-        errors = [error for error in pool.map(_start_one, processes) if error is not None]
+        errors = [error for error in pool.map(start_one, processes) if error is not None]
     if errors:
         raise errors[0]
 
 
-def _start_one(process: NodesProcess) -> BaseException | None:
+def start_one(process: NodesProcess) -> BaseException | None:
+    """Start ``process``: the error its start raised, or ``None``."""
     try:
         process.start()
     except BaseException as error:  # returned: one failure must not hide the others' state
