@@ -84,11 +84,6 @@ class RobotRequests:
             self._finish(pending, CallResult(False, f"its manager went out of reach during its request #{number} "
                                                     f"({pending.label}): {why}"))
 
-    @property
-    def owed(self) -> int:
-        with self._lock:
-            return len(self._pending)
-
     def _expired(self, number: int, pending: _Pending) -> None:
         with self._lock:
             if self._pending.get(number) is not pending:
