@@ -271,6 +271,7 @@ class RemoteBackend:
     def _unanswered(self, robot: Robot, why: str) -> None:
         reason = f"no answer from the manager of {robot.part} ({robot.fqn}) for {self.liveness_timeout:g} s ({why})"
         self._report(lambda listener: listener.node_vanished(robot.part, reason))
+        self._calls.abandon(robot, reason)
         if robot.requests is not None:
             robot.requests.lost(reason)
 
@@ -363,15 +364,17 @@ class RemoteBackend:
         self._report(lambda listener: listener.node_appeared(robot.part, NodeReport(state, {REMOTE_MODE: mode})))
 
     def _state(self, robot: Robot, state: State) -> None:
-        """Its manager says it is in ``state``: reported if news; once active, its mode is read."""
+        """Its manager says it is in ``state``: reported if news; once active, its mode is read,
+        unless its mode event came on the way (a switch's comes before or after its end)."""
         with self._lock:
             changed = robot.present and state is not robot.state
             if changed:
                 robot.state = state
                 robot.assumed, robot.known = False, True
+                told, robot.mode_told = robot.mode_told, robot.mode_told and state is State.ACTIVE
         if changed:
             self._report(lambda listener: listener.node_state(robot.part, state))
-            if state is State.ACTIVE:
+            if state is State.ACTIVE and not told:
                 self._read_mode(robot)
 
     def _read_mode(self, robot: Robot, only: str | None = None) -> None:
@@ -415,10 +418,11 @@ class RemoteBackend:
         mode = str(message.goal_mode.label)
         with self._lock:
             self._calls.heard_event(robot)
-            changed = (robot.present and robot.state not in (State.INACTIVE, State.UNCONFIGURED)
-                       and mode not in ("", robot.mode))
+            taken = robot.present and robot.state not in (State.INACTIVE, State.UNCONFIGURED) and mode != ""
+            changed = taken and mode != robot.mode
             if changed:
                 robot.mode = mode
+            robot.mode_told = robot.mode_told or taken
             if mode == robot.asked and robot.state is State.ACTIVE:
                 robot.asked = None
         if changed:

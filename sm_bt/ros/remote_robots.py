@@ -11,6 +11,7 @@ sometimes sends no event at all), and its next request is made no sooner, nor so
 
 from __future__ import annotations
 
+import itertools
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -61,6 +62,8 @@ class Robot:
     requests_from: float = float("-inf")  # its next change request no sooner (the reference, after a change)
     events: int = 0  # events received: an answer to a call sent before the last one is older news
     asked: str | None = None  # a mode its manager accepted and has not reported yet: read at each probe
+    mode_told: bool = False  # its manager's mode event came since the robot was last told in another state
+    owed: dict[int, Callable[[str], None]] = field(default_factory=dict)  # change calls unanswered: each fails
 
 
 class RobotCalls:
@@ -70,6 +73,7 @@ class RobotCalls:
         self._clock = clock
         self._lock = lock
         self.call_timeout = call_timeout
+        self._keys = itertools.count()
 
     def heard_event(self, robot: Robot) -> None:
         """(With the lock held.) An event of its manager: the reference has ticked."""
@@ -80,9 +84,14 @@ class RobotCalls:
 
     def change(self, robot: Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
                failed: Callable[[str], None]) -> None:
-        """A change request (see :meth:`call`); to the reference, paced (see the module)."""
+        """A change request (see :meth:`call`), owed until answered (:meth:`abandon`); to the
+        reference, paced (see the module). To a manager whose process DDS vouches for, it is sent
+        without asking the graph first whether the service is there: a fleet's switch asks every
+        robot at once, and that question, slow under load, let the first robots' work delay the
+        rest of the sends (README, "Fleets")."""
         with self._lock:
             wait = robot.requests_from - self._clock.now() if robot.reference else 0.0
+            vouched = robot.present and robot.lively
         if wait > 0:
             self._clock.call_later(wait, lambda: self.change(robot, client, request, label, answered, failed))
             return
@@ -93,34 +102,53 @@ class RobotCalls:
                     robot.reads_from = robot.requests_from = self._clock.now() + REFERENCE_EVENTS
             answered(response)
 
-        self.call(robot, client, request, label, accepted, failed)
+        self.call(robot, client, request, label, accepted, failed, checked=not vouched, owed=True)
+
+    def abandon(self, robot: Robot, why: str) -> None:
+        """Its manager is out of reach: the change requests it has not answered fail with ``why``."""
+        with self._lock:
+            owed, robot.owed = list(robot.owed.values()), {}
+        for fail in owed:
+            fail(why)
 
     def call(self, robot: Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
-             failed: Callable[[str], None], timeout: float | None = None) -> None:
+             failed: Callable[[str], None], timeout: float | None = None, *, checked: bool = True,
+             owed: bool = False) -> None:
         """``request`` on ``client``: ``answered(response)``, or ``failed(why)`` once ``timeout`` passed
-        (the call timeout unless given). Any answer is word from its manager."""
-        if not client.service_is_ready():
+        (the call timeout unless given); ``checked``: at once if the graph shows no such service.
+        ``owed``: :meth:`abandon` fails it too. Any answer is word from its manager."""
+        if checked and not client.service_is_ready():
             self._clock.call_later(0.0, lambda: failed(f"{robot.fqn}: no manager serves it ({label})"))
             return
         future = client.call_async(request)
-        finished = threading.Event()
+        key = next(self._keys)
+        ended = [False]
+
+        def first() -> bool:
+            """The first of its answer, its timeout and its abandonment (each from its own thread)."""
+            with self._lock:
+                was, ended[0] = ended[0], True
+                robot.owed.pop(key, None)
+            return not was
 
         def on_done(_: Any) -> None:
-            if finished.is_set():
+            if not first():
                 return
-            finished.set()
             response = future.result()
             with self._lock:
                 robot.last_heard = self._clock.now()
             answered(response)
 
-        def on_timeout() -> None:
-            if finished.is_set():
-                return
-            finished.set()
-            client.remove_pending_request(future)
-            failed(f"the manager of {robot.part} did not answer {label} within {limit:g} s")
+        def given_up(why: str) -> None:
+            if first():
+                client.remove_pending_request(future)
+                failed(why)
 
         limit = timeout if timeout is not None else self.call_timeout
+        if owed:
+            with self._lock:
+                if not ended[0]:  # not answered already
+                    robot.owed[key] = given_up
         future.add_done_callback(on_done)
-        self._clock.call_later(limit, on_timeout)
+        self._clock.call_later(limit, lambda: given_up(f"the manager of {robot.part} did not answer {label} "
+                                                        f"within {limit:g} s"))

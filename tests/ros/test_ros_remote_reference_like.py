@@ -94,6 +94,7 @@ class ScriptedManager:
         self.sm_bt_switch = False  # switch an active system as sm-bt manager tells it (switch_as_sm_bt)
         self.running = threading.Event()  # cleared: its Python hangs (in the next get_state it answers)
         self.running.set()
+        self.reads = 0  # get_mode calls answered
         self._lock = threading.Lock()
         prefix = "/robot1/pilot"
         self._transition_events = node.create_publisher(TransitionEvent, f"{prefix}/transition_event", 10)
@@ -122,6 +123,21 @@ class ScriptedManager:
                 mode_event.goal_mode.label = mode
                 self._mode_events.publish(mode_event)
 
+    def set(self, state: State, mode: str) -> None:
+        """Its system is now ``state`` in ``mode``, told by no event (see tell_state, tell_mode)."""
+        with self._lock:
+            self.state, self.mode = state, mode
+
+    def tell_state(self, start: State, goal: State) -> None:
+        event = TransitionEvent()
+        event.start_state.id, event.goal_state.id = int(start.value), int(goal.value)
+        self._transition_events.publish(event)
+
+    def tell_mode(self, mode: str) -> None:
+        event = ModeEvent()
+        event.goal_mode.label = mode
+        self._mode_events.publish(event)
+
     def _later(self, state: State, mode: str) -> None:
         threading.Timer(DELAY, self.move, (state, mode)).start()
 
@@ -134,6 +150,7 @@ class ScriptedManager:
     def _get_mode(self, request: GetMode.Request, response: GetMode.Response) -> GetMode.Response:
         with self._lock:
             response.current_mode = self.mode
+            self.reads += 1
         return response
 
     def _change_state(self, request: ChangeState.Request, response: ChangeState.Response) -> ChangeState.Response:
@@ -196,7 +213,9 @@ class ScriptedManager:
             if outcome == "succeeded":
                 self.move(State.ACTIVE, request.mode)
             return response
-        if outcome == "succeeded":
+        if outcome == "succeeded" and self.sm_bt_switch and self.state is State.ACTIVE:
+            threading.Thread(target=self.switch_as_sm_bt, args=(request.mode,)).start()
+        elif outcome == "succeeded":
             self._later(State.ACTIVE, request.mode)
         threading.Timer(2 * DELAY, self._outcomes.publish, (told,)).start()
         return response
@@ -357,6 +376,35 @@ def test_a_switch_whose_mode_event_overtakes_its_end_is_never_seen_back_in_the_o
         assert "active.f_normal_mode" not in seen[1:], seen
     finally:
         runtime.close()
+
+
+def test_served_by_sm_bt_a_switch_whose_mode_event_came_on_the_way_is_not_read_again_at_its_end(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    """A switch as sm-bt manager tells it (activating, its mode event, active): the mode is known when the
+    robot is active again, and the fleet asks its manager nothing more meanwhile (over ten robots, a read
+    each was on every switch's way). A robot activated with no mode event on the way is read."""
+    scripted = scripted_sm_bt
+    scripted.sm_bt_switch = True
+    # Its accepted mode is read at the probes' pace (unconfirmed changes): slow here, to tell the reads apart.
+    with _reading(scripted, tmp_path, probe_interval=3.0) as runtime:
+        manager = runtime.manager
+        time.sleep(SETTLE)
+        reads = scripted.reads
+        _done(runtime, "FAST")
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_performance_mode", 5.0, "never seen in FAST")
+        time.sleep(4 * DELAY)
+        assert scripted.reads == reads, f"read {scripted.reads - reads} times during the switch"
+        assert str(manager.actual("robot1")) == "active.f_performance_mode"
+        # Deactivated, then active again with its mode told by no event on the way (one that came while it
+        # was inactive says which mode it will be activated in, no more): read at its activation.
+        scripted.set(State.INACTIVE, "")
+        scripted.tell_state(State.ACTIVE, State.INACTIVE)
+        wait_until(lambda: manager.actual("robot1").state is State.INACTIVE, 5.0, "never seen inactive")
+        scripted.tell_mode("f_performance_mode")
+        time.sleep(4 * DELAY)
+        scripted.set(State.ACTIVE, "f_normal_mode")
+        scripted.tell_state(State.INACTIVE, State.ACTIVE)
+        wait_until(lambda: str(manager.actual("robot1")) == "active.f_normal_mode", 2.0, "its mode never read")
 
 
 def test_served_by_sm_bt_a_manager_that_offers_no_lease_is_probed_at_the_fast_pace_and_heard(

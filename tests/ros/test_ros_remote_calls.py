@@ -1,0 +1,141 @@
+"""A fleet's calls to its robots' managers (sm_bt.ros.remote_robots.RobotCalls): each call ends once, by
+its answer, its timeout or its abandonment when the robot is out of reach, whatever order they come in; a
+change to a manager DDS vouches for is sent without asking the graph first. Clients are fakes here (what a
+call does on the wire is tests/ros/test_ros_remote_reference_like.py's and test_ros_fleet.py's)."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis_profiles import examples
+
+from sm_bt.engine.clock import VirtualClock
+from sm_bt.ros.remote_robots import Robot, RobotCalls
+
+TIMEOUT = 5.0
+
+
+class FakeFuture:
+    def __init__(self) -> None:
+        self._callbacks: list[Callable[[Any], None]] = []
+        self._result: Any = None
+
+    def add_done_callback(self, callback: Callable[[Any], None]) -> None:
+        self._callbacks.append(callback)
+
+    def result(self) -> Any:
+        return self._result
+
+    def answer(self, response: Any) -> None:
+        self._result = response
+        for callback in self._callbacks:
+            callback(self)
+
+
+class FakeClient:
+    """A service client: ``ready`` is what the graph shows; ``futures`` the calls sent."""
+
+    def __init__(self, ready: bool = True) -> None:
+        self.ready = ready
+        self.asked_graph = 0
+        self.futures: list[FakeFuture] = []
+        self.removed: list[FakeFuture] = []
+
+    def service_is_ready(self) -> bool:
+        self.asked_graph += 1
+        return self.ready
+
+    def call_async(self, request: Any) -> FakeFuture:
+        future = FakeFuture()
+        self.futures.append(future)
+        return future
+
+    def remove_pending_request(self, future: FakeFuture) -> None:
+        self.removed.append(future)
+
+
+def _robot(client: FakeClient, *, present: bool = True, lively: bool = True) -> Robot:
+    robot = Robot("robot1", "/robot1/pilot", client, client, client, client, False, client, client, None)
+    robot.present, robot.lively = present, lively
+    return robot
+
+
+def _calls() -> tuple[VirtualClock, RobotCalls]:
+    clock = VirtualClock()
+    return clock, RobotCalls(clock, threading.Lock(), TIMEOUT)  # type: ignore[arg-type]
+
+
+class Ends:
+    def __init__(self) -> None:
+        self.answers: list[Any] = []
+        self.failures: list[str] = []
+
+    def answered(self, response: Any) -> None:
+        self.answers.append(response)
+
+    def failed(self, why: str) -> None:
+        self.failures.append(why)
+
+
+def test_a_change_to_a_vouched_for_manager_is_sent_without_asking_the_graph_and_others_are_checked() -> None:
+    clock, calls = _calls()
+    client = FakeClient(ready=False)
+    ends = Ends()
+    calls.change(_robot(client), client, "request", "change_mode FAST", ends.answered, ends.failed)
+    assert (client.asked_graph, len(client.futures)) == (0, 1)
+    # Not vouched for (DDS lost its lease, or it is not read yet): the graph is asked, and no server fails it.
+    for robot in (_robot(client, lively=False), _robot(client, present=False)):
+        calls.change(robot, client, "request", "change_mode FAST", ends.answered, ends.failed)
+    clock.advance(0.0)
+    assert client.asked_graph == 2 and len(client.futures) == 1
+    assert ends.failures == ["/robot1/pilot: no manager serves it (change_mode FAST)"] * 2
+
+
+def test_abandoned_changes_fail_once_with_the_reason_and_probes_and_answered_calls_are_not_touched() -> None:
+    clock, calls = _calls()
+    client = FakeClient()
+    robot = _robot(client)
+    changes, answered, probe = Ends(), Ends(), Ends()
+    calls.change(robot, client, "request", "change_mode FAST", changes.answered, changes.failed)
+    calls.change(robot, client, "request", "change_mode FAST", answered.answered, answered.failed)
+    calls.call(robot, client, "request", "get_state", probe.answered, probe.failed)
+    client.futures[1].answer("accepted")
+    calls.abandon(robot, "no answer from the manager of robot1")
+    calls.abandon(robot, "again")
+    clock.advance(TIMEOUT + 1.0)  # the timeouts of the ended ones do nothing
+    assert changes.failures == ["no answer from the manager of robot1"] and not changes.answers
+    assert client.removed == [client.futures[0], client.futures[2]]  # the abandoned one, the probe timed out
+    assert answered.answers == ["accepted"] and not answered.failures
+    assert probe.failures == ["the manager of robot1 did not answer get_state within 5 s"]
+    assert robot.owed == {}
+    client.futures[0].answer("late")  # an answer after it was given up is dropped
+    assert not changes.answers
+
+
+@examples(200)
+@given(st.permutations(["answer", "timeout", "abandon", "answer again"]))
+def test_a_call_ends_exactly_once_whichever_of_its_ends_comes_first(order: list[str]) -> None:
+    clock, calls = _calls()
+    client = FakeClient()
+    robot = _robot(client)
+    ends = Ends()
+    calls.change(robot, client, "request", "change_mode FAST", ends.answered, ends.failed)
+    for end in order:
+        if end.startswith("answer"):
+            client.futures[0].answer(end)
+        elif end == "timeout":
+            clock.advance(TIMEOUT)
+        else:
+            calls.abandon(robot, "out of reach")
+    first = order[0]
+    assert len(ends.answers) + len(ends.failures) == 1, (ends.answers, ends.failures)
+    if first.startswith("answer"):
+        assert ends.answers == [first]
+    else:
+        assert ends.failures == ["the manager of robot1 did not answer change_mode FAST within 5 s"
+                                 if first == "timeout" else "out of reach"]
+    assert robot.owed == {}
