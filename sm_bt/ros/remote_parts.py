@@ -324,6 +324,7 @@ class RemoteBackend:
         with self._lock:
             was = robot.present
             robot.present = robot.assumed = False
+            robot.seen_ready.clear()
         if was:
             self._report(lambda listener: listener.node_vanished(
                 robot.part, f"the manager of {robot.part} does not know where {robot.fqn} is"))

@@ -64,6 +64,8 @@ class Robot:
     asked: str | None = None  # a mode its manager accepted and has not reported yet: read at each probe
     mode_told: bool = False  # its manager's mode event came since the robot was last told in another state
     owed: dict[int, Callable[[str], None]] = field(default_factory=dict)  # change calls unanswered: each fails
+    #: Its manager's services the graph showed this client since it was last in reach (see RobotCalls.change).
+    seen_ready: set[Any] = field(default_factory=set)
 
 
 class RobotCalls:
@@ -86,9 +88,11 @@ class RobotCalls:
                failed: Callable[[str], None]) -> None:
         """A change request (see :meth:`call`), owed until answered (:meth:`abandon`); to the
         reference, paced (see the module). To a manager whose process DDS vouches for, it is sent
-        without asking the graph first whether the service is there: a fleet's switch asks every
-        robot at once, and that question, slow under load, let the first robots' work delay the
-        rest of the sends (README, "Fleets")."""
+        without asking the graph whether the service is there, once the graph has shown it since the
+        robot was last out of reach: a fleet's switch asks every robot at once, and that question,
+        slow under load, let the first robots' work delay the rest of the sends (README, "Fleets").
+        The first time, it is asked: until a client has seen the service, the answer may find no
+        way back to it."""
         with self._lock:
             wait = robot.requests_from - self._clock.now() if robot.reference else 0.0
             vouched = robot.present and robot.lively
@@ -105,9 +109,11 @@ class RobotCalls:
         self.call(robot, client, request, label, accepted, failed, checked=not vouched, owed=True)
 
     def abandon(self, robot: Robot, why: str) -> None:
-        """Its manager is out of reach: the change requests it has not answered fail with ``why``."""
+        """Its manager is out of reach: the change requests it has not answered fail with ``why``, and
+        its services are asked of the graph again (it may come back as another process)."""
         with self._lock:
             owed, robot.owed = list(robot.owed.values()), {}
+            robot.seen_ready.clear()
         for fail in owed:
             fail(why)
 
@@ -115,11 +121,17 @@ class RobotCalls:
              failed: Callable[[str], None], timeout: float | None = None, *, checked: bool = True,
              owed: bool = False) -> None:
         """``request`` on ``client``: ``answered(response)``, or ``failed(why)`` once ``timeout`` passed
-        (the call timeout unless given); ``checked``: at once if the graph shows no such service.
-        ``owed``: :meth:`abandon` fails it too. Any answer is word from its manager."""
-        if checked and not client.service_is_ready():
-            self._clock.call_later(0.0, lambda: failed(f"{robot.fqn}: no manager serves it ({label})"))
-            return
+        (the call timeout unless given); ``checked`` (or never seen since it was in reach): at once if
+        the graph shows no such service. ``owed``: :meth:`abandon` fails it too. Any answer is word from
+        its manager."""
+        with self._lock:
+            checked = checked or client not in robot.seen_ready
+        if checked:
+            if not client.service_is_ready():
+                self._clock.call_later(0.0, lambda: failed(f"{robot.fqn}: no manager serves it ({label})"))
+                return
+            with self._lock:
+                robot.seen_ready.add(client)
         future = client.call_async(request)
         key = next(self._keys)
         ended = [False]

@@ -1,7 +1,8 @@
 """A fleet's calls to its robots' managers (sm_bt.ros.remote_robots.RobotCalls): each call ends once, by
 its answer, its timeout or its abandonment when the robot is out of reach, whatever order they come in; a
-change to a manager DDS vouches for is sent without asking the graph first. Clients are fakes here (what a
-call does on the wire is tests/ros/test_ros_remote_reference_like.py's and test_ros_fleet.py's)."""
+change to a manager DDS vouches for asks the graph only the first time since the robot was in reach.
+Clients are fakes here (what a call does on the wire is tests/ros/test_ros_remote_reference_like.py's and
+test_ros_fleet.py's)."""
 
 from __future__ import annotations
 
@@ -81,18 +82,26 @@ class Ends:
         self.failures.append(why)
 
 
-def test_a_change_to_a_vouched_for_manager_is_sent_without_asking_the_graph_and_others_are_checked() -> None:
+def test_a_change_to_a_vouched_for_manager_asks_the_graph_once_until_the_robot_was_out_of_reach() -> None:
     clock, calls = _calls()
-    client = FakeClient(ready=False)
+    client = FakeClient()
+    robot = _robot(client)
     ends = Ends()
-    calls.change(_robot(client), client, "request", "change_mode FAST", ends.answered, ends.failed)
-    assert (client.asked_graph, len(client.futures)) == (0, 1)
-    # Not vouched for (DDS lost its lease, or it is not read yet): the graph is asked, and no server fails it.
-    for robot in (_robot(client, lively=False), _robot(client, present=False)):
+    for _ in range(3):
         calls.change(robot, client, "request", "change_mode FAST", ends.answered, ends.failed)
+    assert (client.asked_graph, len(client.futures)) == (1, 3)
+    calls.abandon(robot, "out of reach")  # back later, perhaps as another process: asked again
+    calls.change(robot, client, "request", "change_mode FAST", ends.answered, ends.failed)
+    assert (client.asked_graph, len(client.futures)) == (2, 4)
+    # Not vouched for (DDS lost its lease, or it is not read yet): the graph is asked each time, and no
+    # server fails the call at once.
+    client.ready = False
+    for doubted in (_robot(client, lively=False), _robot(client, present=False)):
+        doubted.seen_ready.add(client)
+        calls.change(doubted, client, "request", "change_mode FAST", ends.answered, ends.failed)
     clock.advance(0.0)
-    assert client.asked_graph == 2 and len(client.futures) == 1
-    assert ends.failures == ["/robot1/pilot: no manager serves it (change_mode FAST)"] * 2
+    assert client.asked_graph == 4 and len(client.futures) == 4
+    assert ends.failures[-2:] == ["/robot1/pilot: no manager serves it (change_mode FAST)"] * 2
 
 
 def test_abandoned_changes_fail_once_with_the_reason_and_probes_and_answered_calls_are_not_touched() -> None:
