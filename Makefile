@@ -66,7 +66,7 @@ stress: $(STAMP)
 		tests/e2e/stress_fleet_hosts.py tests/e2e/stress_fleet_restarts.py
 
 # The performance goals (docs/performance.md): a table with each goal, build/bench/results.json
-# and build/bench/scaling.png; exit status 1 if a goal is not met. About 5-6 minutes on 2 cores.
+# and build/bench/scaling.png; exit status 1 if a goal is not met. About 8 minutes on 2 cores.
 .PHONY: bench
 bench: $(STAMP)
 	@mkdir -p $(ROS_LOG_DIR)

@@ -40,14 +40,15 @@ import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from bench.figures import Figure
 from bench.ros import _cpu_seconds
 from bench.ros_baseline import SpunClient, confirmed, freeze_garbage
+from bench.ros_fleet_process import FleetAsker, process_switches
 from bench.ros_plant import start_one
 from sm_bt.model.states import State
-from sm_bt.ros.node_process import NodesError, NodesProcess
+from sm_bt.ros.node_process import ManagerProcess, NodesError, NodesProcess
 
 FLEET = "fleet"
 ROBOT_SYSTEM = "pilot"
@@ -65,6 +66,9 @@ CALL_TIMEOUT = 2.0
 RESPONSE_PATH_GRACE = 0.3
 #: lifecycle_msgs/msg/State's id of active.
 ACTIVE = 3
+#: Seconds for the domain to calm down after the fleet's process joins or leaves it (every participant
+#: hears of its endpoints coming or going) before a block is timed.
+CALM = 2.0
 
 
 def fleet_text(robots: int) -> str:
@@ -99,22 +103,6 @@ def _wait(condition: Callable[[], bool], what: str, limit: float = TIMEOUT, poll
 
 
 # -- the processes ----------------------------------------------------------------------------------------
-
-
-class ManagerProcess(NodesProcess):
-    """``sm-bt manager MODEL ARGS...`` as a child process: ready once it prints what it serves;
-    stopped as every ROS process here (SIGINT to its own PID, then SIGKILL)."""
-
-    def __init__(self, model: str, *args: str, ready_timeout: float = START_LIMIT) -> None:
-        super().__init__(model, ready_timeout=ready_timeout)
-        self.command = [sys.executable, "-m", "sm_bt.cli", "manager", model, *args]
-
-    def _read(self, stream: IO[str], lines: Any, watch_ready: bool) -> None:
-        for line in stream:
-            lines.append(line.rstrip("\n"))
-            if watch_ready and line.startswith("mode manager "):
-                self._ready.set()
-        stream.close()
 
 
 def _start_all(processes: Sequence[NodesProcess]) -> None:
@@ -353,7 +341,8 @@ def run(quick: bool) -> list[Figure]:
         path = Path(tmp) / "fleet.yaml"
         path.write_text(fleet_text(count))
         model = load_model(path)
-        managers = [ManagerProcess(ROBOT_SYSTEM, "--namespace", f"/{r}", "--log-level", "warning") for r in robots]
+        managers = [ManagerProcess(ROBOT_SYSTEM, "--namespace", f"/{r}", "--log-level", "warning",
+                                   ready_timeout=START_LIMIT) for r in robots]
         nodes = [NodesProcess(ROBOT_SYSTEM, "--namespace", f"/{r}", "--state", "inactive", ready_timeout=START_LIMIT)
                  for r in robots]
         fleet_process: ManagerProcess | None = None
@@ -383,9 +372,11 @@ def run(quick: bool) -> list[Figure]:
             runtime.close()
             runtime = None
 
-            # Idle: the fleet as a process of its own.
-            fleet_process = ManagerProcess(str(path), "--node-name", "fleet_manager", "--log-level", "warning")
+            # Idle: the fleet as a process of its own; then its switches, asked by a client.
+            fleet_process = ManagerProcess(str(path), "--node-name", "fleet_manager", "--log-level", "warning",
+                                           ready_timeout=START_LIMIT)
             figures.append(_idle(fleet_process, client, robots, managers, settle, window, clock))
+            figures.append(_process_switches(fleet_process, client, rounds, switches, clock))
         finally:
             if client is not None:
                 client.close()
@@ -424,6 +415,28 @@ def _switches(model: Any, robots: Sequence[str], at: str, rounds: int, switches:
                            "floor_all_ms": [round(t * 1e3, 1) for t in floor],
                            "block_start_up_s": start_up}), at
 
+
+
+def _process_switches(process: ManagerProcess, client: _Client, rounds: int, switches: int, clock: float) -> Figure:
+    """Row 5: the fleet's switch across processes (bench/ros_fleet_process.py), from __DEFAULT__."""
+    client.ready()
+    asker = FleetAsker(client.node, FLEET)
+    try:
+        asker.ready()
+        freeze_garbage()
+
+        def stop() -> None:
+            process.stop()
+            time.sleep(CALM)
+
+        def start() -> None:
+            process.start()
+            time.sleep(CALM)
+
+        return process_switches(asker, start, stop, client.switch, "__DEFAULT__", rounds, switches, SWITCH_GOAL,
+                                lambda what: _say(clock, what))
+    finally:
+        asker.close()
 
 
 def _cuts(manager: Any, client: _Client, managers: Sequence[ManagerProcess], robots: Sequence[str], cycles: int,

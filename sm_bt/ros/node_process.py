@@ -1,10 +1,12 @@
-"""A child process running simulated nodes (``sm-bt sim-nodes``), started and stopped safely.
+"""A child process running simulated nodes (``sm-bt sim-nodes``) or a manager (``sm-bt manager``),
+started and stopped safely.
 
-Used by ``sm-bt demo --ros`` and by the tests. :meth:`NodesProcess.start` waits for the child's
-``READY`` line; its output is read by threads (a full pipe would block the child). Stopping is
-always by the child's own PID: SIGINT, a grace period, then SIGKILL, because Fast DDS can
-(rarely) hang on exit. The child inherits this process's environment, so prepare the ROS
-environment (:func:`sm_bt.ros.environment.prepare`) first.
+Used by ``sm-bt demo --ros`` (and ``--fleet --ros``), the benchmarks and the tests.
+:meth:`NodesProcess.start` waits for the child's ``READY`` line (a manager's: the line that says
+what it serves); its output is read by threads (a full pipe would block the child). Stopping is
+always by the child's own PID: SIGINT, a grace period, then SIGKILL, because Fast DDS can (rarely)
+hang on exit. The child inherits this process's environment, so prepare the ROS environment
+(:func:`sm_bt.ros.environment.prepare`) first.
 """
 
 from __future__ import annotations
@@ -147,3 +149,19 @@ class NodesProcess:
 
     def _stderr_suffix(self) -> str:
         return f"\nits stderr:\n{self.stderr}" if self._stderr else ""
+
+
+class ManagerProcess(NodesProcess):
+    """``sm-bt manager MODEL ARGS...`` as a child process: ready once it says what it serves."""
+
+    def __init__(self, model: str, *args: str, ready_timeout: float = READY_TIMEOUT,
+                 env: dict[str, str] | None = None) -> None:
+        super().__init__(model, ready_timeout=ready_timeout, env=env)
+        self.command = [sys.executable, "-m", "sm_bt.cli", "manager", model, *args]
+
+    def _read(self, stream: IO[str], lines: collections.deque[str], watch_ready: bool) -> None:
+        for line in stream:
+            lines.append(line.rstrip("\n"))
+            if watch_ready and line.startswith("mode manager "):
+                self._ready.set()
+        stream.close()
