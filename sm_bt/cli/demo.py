@@ -36,7 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fleet", action="store_true",
                         help="a fleet's shift instead (models/fleet.yaml): two robots, each the pilot under a "
                              "manager of its own, driven by the fleet's manager; robot1 is cut off from the fleet "
-                             "and healed meanwhile (simulated)")
+                             "and healed meanwhile (simulated; with --ros each robot is two processes, its nodes "
+                             "and its own sm-bt manager, and the cut freezes its manager)")
     parser.add_argument("--rules", action="store_true",
                         help="the model with the laser rule (pilot_rules): the manager itself switches to "
                              "degraded mode when the laser fails, and holds it there against lower-priority "
@@ -57,23 +58,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 #: The pilot demo's default --speed.
 PILOT_SPEED = 35.0
 #: The pilot demo's options, which the fleet's shift does not take (with their defaults).
-PILOT_ONLY = {"tree": None, "laser_failure_at": 15.0, "laser_repair_at": Auto.AUTO, "cycles": 2, "rules": False,
-              "ros": False}
+PILOT_ONLY = {"tree": None, "laser_failure_at": 15.0, "laser_repair_at": Auto.AUTO, "cycles": 2, "rules": False}
 
 
 def _fleet(args: argparse.Namespace) -> int:
     given = [f"--{name.replace('_', '-')}" for name, default in PILOT_ONLY.items() if getattr(args, name) != default]
     if given:
-        raise UsageError(f"--fleet runs the fleet's shift, simulated: {', '.join(given)} belong to the pilot demo")
+        raise UsageError(f"--fleet runs the fleet's shift: {', '.join(given)} belong to the pilot demo")
+    if args.ros and args.speed is not None:
+        raise UsageError("--fleet --ros runs in real time: --speed paces the simulated fleet only")
     from sm_bt.trees.fleet.demo import FleetDemo, FleetOptions
 
     options = FleetOptions(speed=FLEET_SPEED if args.speed is None else args.speed, quiet=args.quiet,
-                           view=args.view, view_host=args.host, record=args.record, linger=args.view is not None)
+                           view=args.view, view_host=args.host, record=args.record, linger=args.view is not None,
+                           ros=args.ros)
+    failures: tuple[type[Exception], ...] = ()  # what the platform's set-up may raise, told in a line
+    if options.ros:
+        from sm_bt.ros.environment import RosUnavailable
+        from sm_bt.ros.node_process import NodesError  # needs no rclpy
+
+        failures = (RosUnavailable, NodesError)
     try:
         return FleetDemo(options).run()
     except OSError as error:  # the view's port
         raise CliError(f"cannot serve the view on {options.view_host}:{options.view}: "
                        f"{error.strerror or error} (choose another port: --view PORT, 0 for any)") from None
+    except failures as error:
+        raise CliError(str(error)) from None
 
 
 def _tree(text: str) -> str:

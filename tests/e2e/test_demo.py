@@ -265,8 +265,7 @@ def test_the_fleet_demo_tells_a_shift_with_a_robot_cut_off_and_healed(capsys: py
 
 def test_the_fleet_demo_takes_none_of_the_pilot_demos_options(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["demo", "--fleet", "--cycles", "3", "--rules"]) == 2
-    assert "--fleet runs the fleet's shift, simulated: --cycles, --rules belong to the pilot demo" in \
-        capsys.readouterr().err
+    assert "--fleet runs the fleet's shift: --cycles, --rules belong to the pilot demo" in capsys.readouterr().err
 
 
 def test_a_fleet_shift_whose_robot_never_comes_back_is_told_not_as_expected() -> None:

@@ -1,14 +1,15 @@
-"""``sm-bt demo --fleet``: a fleet's shift on simulated managers of managers, one robot cut off and healed.
+"""``sm-bt demo --fleet``: a fleet's shift over managers of managers, one robot cut off and healed.
 
-The fleet (``models/fleet.yaml``) has two robots, each the pilot's four simulated nodes under a
-manager of its own (:func:`sm_bt.sim.remotes.simulated_fleet`), all on one virtual clock. The mission
-tree (:mod:`sm_bt.trees.fleet`) asks the fleet's manager only: the day shift, then it waits for the
-night, then ends the shift. Meanwhile robot1 is cut off from the fleet (a partition: its own manager
-and nodes go on): the fleet sees it unknown, its rule ``robot1_lost`` asks for the night, which
-cannot reach robot1 yet; at the heal the fleet reads robot1 afresh and restores its target, the
-night is reached and the tree ends the shift. The narrative tells the fleet's requests, rules and
-divergences, and each robot's own requests under it; the view (``--view``) shows the tree and the
-fleet's table and timeline, a band per robot.
+The fleet (``models/fleet.yaml``) has two robots, each the pilot's four nodes under a manager of its
+own: simulated, all on one virtual clock (:class:`~sm_bt.trees.fleet.platforms.SimulatedFleet`), or
+with ``--ros`` real processes (:class:`~sm_bt.trees.fleet.ros_platform.RosFleet`). The mission tree
+(:mod:`sm_bt.trees.fleet`) asks the fleet's manager only: the day shift, then it waits for the night,
+then ends the shift. Meanwhile robot1 is cut off from the fleet (its own manager and nodes go on):
+the fleet sees it unknown, its rule ``robot1_lost`` asks for the night, which cannot reach robot1
+yet; at the heal the fleet reads robot1 afresh and restores its target, the night is reached and the
+tree ends the shift. The narrative tells the fleet's requests, rules and divergences, and each
+robot's own requests under it; the view (``--view``) shows the tree and the fleet's table and
+timeline, a band per robot.
 """
 
 from __future__ import annotations
@@ -20,19 +21,14 @@ import py_trees
 from py_trees.common import Status
 from rich.console import Console
 
-from sm_bt.bundled import path as bundled_model
 from sm_bt.engine.events import Event, EventKind, Subscription
 from sm_bt.model.types import NodePart
 from sm_bt.monitor import terminal_console
-from sm_bt.sim.remotes import RemoteManagers, simulated_fleet
 from sm_bt.trees.fleet import DEMO_SPEED, FLEET, create_root
+from sm_bt.trees.fleet.platforms import CUT_ROBOT, FleetPlatform, SimulatedFleet
 from sm_bt.view import View, attach_view
 
-#: Each robot's model (bundled), and the robot the demo cuts off.
-ROBOT_MODEL, CUT_ROBOT = "pilot", "robot1"
-#: How long each of the robots' node transitions takes (virtual seconds).
-TRANSITION_DELAY = 0.3
-#: Virtual seconds between ticks, and the longest the shift may take.
+#: Seconds (of the platform's time) between ticks, and the longest the shift may take.
 TICK, LIMIT = 0.1, 120.0
 
 
@@ -44,27 +40,29 @@ def _starts(event: Event) -> bool:
 
 @dataclass
 class FleetOptions:
-    cut_at: float | None = 3.0  # virtual time robot1 is cut off (None: never)
+    cut_at: float | None = 3.0  # time robot1 is cut off (None: never)
     heal_at: float | None = 7.0  # ... and healed (None: never)
-    speed: float = DEMO_SPEED  # virtual seconds per wall second; 0: as fast as possible
+    speed: float = DEMO_SPEED  # virtual seconds per wall second (simulated); 0: as fast as possible
     quiet: bool = False
     view: int | None = None
     view_host: str = "127.0.0.1"
     record: str | None = None
     linger: bool = False
+    ros: bool = False  # real processes (RosFleet) instead of simulated ones
 
 
 class FleetDemo:
     def __init__(self, options: FleetOptions, console: Console | None = None) -> None:
         self.options = options
         self.console = console or terminal_console()
-        model = bundled_model("fleet")
-        self.fleet, self.robots = simulated_fleet(model, {name: ROBOT_MODEL for name in ("robot1", "robot2")},
-                                                  transition_delay=TRANSITION_DELAY)
-        self.manager = self.fleet.manager
-        backend = self.fleet.backend
-        assert isinstance(backend, RemoteManagers)
-        self.backend: RemoteManagers = backend
+        self._started = time.monotonic()
+        if options.ros:
+            from sm_bt.trees.fleet.ros_platform import RosFleet
+
+            self.platform: FleetPlatform = RosFleet(say=self._setting_up)
+        else:
+            self.platform = SimulatedFleet(options.speed)
+        self.manager = self.platform.manager
         self.tree: py_trees.trees.BehaviourTree = py_trees.trees.BehaviourTree(create_root())
         self.tree.setup(manager=self.manager)
         self.view: View | None = None
@@ -74,9 +72,7 @@ class FleetDemo:
             if self.view.url:
                 self._always(f"view: {self.view.url}")
         self._subscriptions: list[Subscription] = [self.manager.subscribe(self._fleet_event)]
-        for name, robot in self.robots.items():
-            self._subscriptions.append(robot.manager.subscribe(
-                lambda event, name=name: self._robot_event(name, event), kinds=(EventKind.REQUEST,)))
+        self.platform.follow_robots(self._robot_request)
         self.modes: list[tuple[float, str]] = []
         self.cut_done: bool = False
         self.heal_done: bool = False
@@ -85,7 +81,12 @@ class FleetDemo:
 
     def say(self, text: str, style: str = "") -> None:
         if not self.options.quiet:
-            self.console.print(f"[{self.fleet.now():6.2f} s] {text}", style=style or None, markup=False,
+            self.console.print(f"[{self.platform.now():6.2f} s] {text}", style=style or None, markup=False,
+                               soft_wrap=True)
+
+    def _setting_up(self, text: str) -> None:
+        if not self.options.quiet:
+            self.console.print(f"[set-up {time.monotonic() - self._started:5.1f} s] {text}", markup=False,
                                soft_wrap=True)
 
     def _always(self, text: str) -> None:
@@ -111,16 +112,13 @@ class FleetDemo:
                 self.say(f"fleet ~~ {event.message}", "yellow")
         elif event.kind is EventKind.ACTUAL and event.part == FLEET and event.actual is not None \
                 and event.actual.mode and (not self.modes or self.modes[-1][1] != str(event.actual)):
-            self.modes.append((self.fleet.now(), str(event.actual)))
+            self.modes.append((self.platform.now(), str(event.actual)))
 
-    def _robot_event(self, robot: str, event: Event) -> None:
-        request = event.request
-        if request is None:
-            return
-        if _starts(event):
-            self.say(f"    {robot}'s manager -> {event.message} [{request.requester}]")
+    def _robot_request(self, robot: str, text: str, ended: bool | None) -> None:
+        if ended is None:
+            self.say(f"    {robot}'s manager -> {text}")
         else:
-            self.say(f"    {robot}'s manager <- {event.message}", "" if request.succeeded else "red")
+            self.say(f"    {robot}'s manager <- {text}", "" if ended else "red")
 
     # -- the run -----------------------------------------------------------------------------------
 
@@ -128,12 +126,10 @@ class FleetDemo:
         options = self.options
         if not self.cut_done and options.cut_at is not None and now >= options.cut_at:
             self.cut_done = True
-            self.say(f"{CUT_ROBOT} is cut off from the fleet (its own manager and nodes go on)", "bold")
-            self.backend.cut(CUT_ROBOT)
+            self.say(self.platform.cut(CUT_ROBOT), "bold")
         if self.cut_done and not self.heal_done and options.heal_at is not None and now >= options.heal_at:
             self.heal_done = True
-            self.say(f"{CUT_ROBOT} is reachable again", "bold")
-            self.backend.heal(CUT_ROBOT)
+            self.say(self.platform.heal(CUT_ROBOT), "bold")
 
     def run(self) -> int:
         """The shift to its end, the summary; the exit code (0: the shift ended as expected)."""
@@ -143,18 +139,16 @@ class FleetDemo:
             self.close()
 
     def _run(self) -> int:
-        started = time.monotonic()
-        self.say(f"fleet shift over {', '.join(self.robots)} (each the pilot under its own manager), on simulated "
-                 "managers of managers")
+        platform = self.platform
+        self.say(f"fleet shift over {', '.join(platform.robots)} (each the pilot under its own manager), on "
+                 f"{platform.description}")
         root = self.tree.root
-        while root.status not in (Status.SUCCESS, Status.FAILURE) and self.fleet.now() < LIMIT:
-            self._scenario(self.fleet.now())
+        while root.status not in (Status.SUCCESS, Status.FAILURE) and platform.now() < LIMIT:
+            self._scenario(platform.now())
             self.tree.tick()
-            self.fleet.run(TICK)
-            if self.options.speed > 0:
-                time.sleep(TICK / self.options.speed)
+            platform.advance(TICK)
         self.say(f"shift {root.status.value}")
-        code = self.summary(time.monotonic() - started)
+        code = self.summary(time.monotonic() - self._started)
         if self.view is not None and self.view.url and self.options.linger:
             self.view.stay(self._always)
         return code
@@ -164,12 +158,13 @@ class FleetDemo:
         if not self.options.quiet:
             out.print()
         out.print("Summary", style="bold")
-        out.print(f"  shift {self.tree.root.status.value} after {self.fleet.now():.1f} s of virtual time "
-                  f"({wall:.1f} s wall)", markup=False)
+        platform = self.platform
+        out.print(f"  shift {self.tree.root.status.value} after {platform.now():.1f} s of {platform.time_unit} time "
+                  f"({wall:.1f} s wall, set-up included)", markup=False)
         out.print("  fleet modes: " + " -> ".join(f"{mode} ({at:.1f} s)" for at, mode in self.modes), markup=False,
                   soft_wrap=True)
-        robots = {name: str(robot.manager.actual(ROBOT_MODEL)) for name, robot in self.robots.items()}
-        seen = {name: str(self.manager.actual(name)) for name in self.robots}
+        robots = {name: platform.robot_view(name) for name in platform.robots}
+        seen = {name: str(self.manager.actual(name)) for name in platform.robots}
         out.print("  robots, by their own managers: " + ", ".join(f"{k} {v}" for k, v in robots.items())
                   + "; as the fleet sees them: " + ", ".join(f"{k} {v}" for k, v in seen.items()), markup=False,
                   soft_wrap=True)
@@ -183,6 +178,4 @@ class FleetDemo:
             subscription.cancel()
         if self.view is not None:
             self.view.close()
-        self.fleet.close()
-        for robot in self.robots.values():
-            robot.close()
+        self.platform.close()
