@@ -443,3 +443,28 @@ class _Watched:
             if values.get("last_request_outcome") == "failed" and last.partition(" ")[2] == self.description:
                 found.append(f"the manager says request {last} failed: {values.get('last_request_reason', '')}")
         return found
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a request to ``sm-bt manager`` ended, as its ``/{part}/request_outcome`` tells it."""
+
+    request: int
+    description: str
+    requester: str
+    outcome: str  # succeeded, failed or refused
+    reason: str
+
+
+def follow_outcomes(node: Any, part: str, told: Callable[[Outcome], None]) -> Any:
+    """Subscribe ``node`` (spun by its owner) to ``/{part}/request_outcome``: ``told`` each outcome, in
+    that node's executor thread; the subscription (for ``node.destroy_subscription``)."""
+    from sm_bt_msgs.msg import RequestOutcome
+
+    from sm_bt.ros.manager_node import OUTCOMES
+
+    def heard(message: Any) -> None:
+        told(Outcome(int(message.request), str(message.description), str(message.requester), str(message.outcome),
+                     str(message.reason)))
+
+    return node.create_subscription(RequestOutcome, f"/{part.strip('/')}/request_outcome", heard, OUTCOMES)

@@ -95,20 +95,22 @@ def test_only_the_ros_adapters_import_rclpy() -> None:
                 continue
             outside |= {m for m in imported_modules_of(path) if m.split(".")[0] in ros_names}
     assert not outside, "rclpy and ROS messages belong in sm_bt.ros"
-    # The simulated side never reaches up into the ROS adapters; of the trees, only the pilot
-    # example's platform for `sm-bt demo --ros` does (it is imported by that command alone).
-    platform = ROOT / "trees" / "pilot" / "ros_platform.py"
-    trees = set().union(*(imported_modules_of(path) for path in (ROOT / "trees").rglob("*.py") if path != platform))
+    # The simulated side never reaches up into the ROS adapters; of the trees, only the examples'
+    # platforms for `sm-bt demo --ros` and `sm-bt demo --fleet --ros` do (imported by those commands alone).
+    platforms = {ROOT / "trees" / "pilot" / "ros_platform.py", ROOT / "trees" / "fleet" / "ros_platform.py"}
+    trees = set().union(*(imported_modules_of(path) for path in (ROOT / "trees").rglob("*.py")
+                          if path not in platforms))
     below = imported_modules(ROOT / "sm_bt" / "engine") | imported_modules(ROOT / "sm_bt" / "sim") | \
         imported_modules(ROOT / "behaviours") | trees
     assert not {m for m in below if m.startswith("sm_bt.ros")}
-    assert {m for m in imported_modules_of(platform) if m.startswith("sm_bt.ros")}  # the rule can fail
+    for platform in platforms:  # the rule can fail
+        assert {m for m in imported_modules_of(platform) if m.startswith("sm_bt.ros")}, platform
 
 
-def test_the_pilot_demo_imports_without_rclpy() -> None:
+def test_the_pilot_and_fleet_demos_import_without_rclpy() -> None:
     code = (
         "import sys; sys.modules['rclpy'] = None\n"
-        "import sm_bt.trees.pilot.demo, sm_bt.trees.pilot.metacontrol\n"
+        "import sm_bt.trees.pilot.demo, sm_bt.trees.pilot.metacontrol, sm_bt.trees.fleet.demo\n"
         "assert not any(m == 'rclpy' or m.startswith('rclpy.') for m in sys.modules if sys.modules[m])\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)

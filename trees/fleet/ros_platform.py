@@ -15,7 +15,6 @@ from __future__ import annotations
 import functools
 import os
 import signal
-import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -24,7 +23,9 @@ from typing import Any
 
 from sm_bt.bundled import path as bundled_model
 from sm_bt.engine.manager import ModeManager
+from sm_bt.model.errors import Error
 from sm_bt.model.loader import load_model
+from sm_bt.ros.client import ModeClient, Outcome, follow_outcomes
 from sm_bt.ros.environment import prepare, require_ros
 from sm_bt.ros.node_process import ManagerProcess, NodesError, NodesProcess
 from sm_bt.ros.runtime import RosRuntime
@@ -72,7 +73,8 @@ class RosFleet:
             self._wait_for_robots()
             say(f"the fleet's manager {FLEET_NODE} has read {', '.join(self.robots)} "
                 f"({time.monotonic() - self._began:.1f} s)")
-            self._clients = self._robot_clients()
+            self._asking = self._robot_view()
+            stack.callback(self._asking.close)
             self._subscriptions: list[Any] = []
             self._began = time.monotonic()
             self._stop = stack.pop_all()  # kept running; close() unwinds it
@@ -88,13 +90,9 @@ class RosFleet:
                 raise NodesError(f"the fleet did not read {', '.join(unread)} within {DISCOVERY_TIMEOUT:.0f} s")
             time.sleep(0.05)
 
-    def _robot_clients(self) -> dict[str, tuple[Any, Any]]:
-        from lifecycle_msgs.srv import GetState
-        from system_modes_msgs.srv import GetMode
-
-        node = self.runtime.node
-        return {robot: (node.create_client(GetState, f"/{robot}/{ROBOT_MODEL}/get_state"),
-                        node.create_client(GetMode, f"/{robot}/{ROBOT_MODEL}/get_mode")) for robot in self.robots}
+    def _robot_view(self) -> ModeClient:
+        """Asks the robots' own managers (a node of its own in the runtime's context, spun in its calls)."""
+        return ModeClient(timeout=CALL_TIMEOUT, node_name="fleet_demo_robots", context=self.runtime.context)
 
     @property
     def processes(self) -> list[NodesProcess]:
@@ -113,19 +111,15 @@ class RosFleet:
 
     def follow_robots(self, tell: RobotTeller) -> None:
         """Each robot's requests as they end (its manager's ``request_outcome``)."""
-        from sm_bt_msgs.msg import RequestOutcome
 
-        from sm_bt.ros.manager_node import OUTCOMES
+        def told(robot: str, ended: Outcome) -> None:
+            reason = f": {ended.reason}" if ended.reason else ""
+            tell(robot, f"request #{ended.request} {ended.description} [{ended.requester}] {ended.outcome}{reason}",
+                 ended.outcome == "succeeded")
 
-        def told(robot: str, message: Any) -> None:
-            reason = f": {message.reason}" if message.reason else ""
-            tell(robot, f"request #{message.request} {message.description} [{message.requester}] {message.outcome}"
-                        f"{reason}", str(message.outcome) == "succeeded")
-
-        node = self.runtime.node
         for robot in self.robots:
-            self._subscriptions.append(node.create_subscription(
-                RequestOutcome, f"/{robot}/{ROBOT_MODEL}/request_outcome", functools.partial(told, robot), OUTCOMES))
+            self._subscriptions.append(follow_outcomes(self.runtime.node, f"{robot}/{ROBOT_MODEL}",
+                                                       functools.partial(told, robot)))
 
     def cut(self, robot: str) -> str:
         os.kill(self._pid(robot), signal.SIGSTOP)
@@ -137,18 +131,12 @@ class RosFleet:
         return f"{robot}'s manager goes on (SIGCONT)"
 
     def robot_view(self, robot: str) -> str:
-        from lifecycle_msgs.srv import GetState
-        from system_modes_msgs.srv import GetMode
-
-        get_state, get_mode = self._clients[robot]
-        state = self._call(get_state, GetState.Request())
-        if state is None:
-            return f"no answer from /{robot}/{ROBOT_MODEL}/get_state within {CALL_TIMEOUT:g} s"
-        label = str(state.current_state.label)
-        if label != "active":
-            return label
-        mode = self._call(get_mode, GetMode.Request())
-        return f"active.{mode.current_mode}" if mode is not None else "active (its mode did not answer)"
+        part = f"{robot}/{ROBOT_MODEL}"
+        try:
+            state = self._asking.get_state(part)
+            return f"active.{self._asking.get_mode(part)}" if state == "active" else state
+        except Error as error:  # out of reach: said, not raised (the summary tells it)
+            return f"not known ({error})"
 
     def close(self) -> None:
         """Close the fleet's runtime, then stop the robots' processes (SIGCONT, SIGINT, then SIGKILL)."""
@@ -166,15 +154,6 @@ class RosFleet:
         if pid is None:
             raise NodesError(f"the manager of {robot} is not running")
         return pid
-
-    def _call(self, client: Any, request: Any) -> Any:
-        done = threading.Event()
-        future = client.call_async(request)
-        future.add_done_callback(lambda _future: done.set())
-        if not done.wait(CALL_TIMEOUT):
-            client.remove_pending_request(future)
-            return None
-        return future.result() if future.exception() is None else None
 
     def _stop_processes(self) -> None:
         processes = self.processes
