@@ -200,6 +200,9 @@ class DiagnosticsPublisher:
         self._publisher = removable.publisher(node, DiagnosticArray, topic, 10)
         self._lock = threading.Lock()
         self._last: dict[str, Request] = {}
+        #: Requests that ended badly and whose status has not gone out yet: one the next request of the
+        #: part replaced before the gathering is published with it all the same (a waiting client's news).
+        self._unpublished: dict[str, Request] = {}
         self._dirty: set[str] = set()
         self._urgent: set[str] = set()  # of the dirty parts, those to publish first (failures)
         model = manager.model
@@ -238,11 +241,14 @@ class DiagnosticsPublisher:
                 self._changed(name)
 
     def _note(self, part: str, request: Request) -> None:
+        failed = request.done and not request.succeeded
         with self._lock:
             self._last[part] = request
+            if failed:
+                self._unpublished[part] = request
         # A failure is news at once; a start or a success can wait for the burst around it (a caller
         # may start the next change right away: publishing then would hold its answers back).
-        self._changed(part, now=request.done and not request.succeeded)
+        self._changed(part, now=failed)
 
     def _changed(self, part: str, now: bool = False) -> None:
         with self._lock:
@@ -295,11 +301,20 @@ class DiagnosticsPublisher:
                                                   ("every_part_within_s", f"{every:g}")))
 
     def statuses(self, parts: list[str]) -> list[PartDiagnostic]:
+        """Each part's status now; before it, that of a failure a later request replaced unpublished."""
         manager = self._manager
         with manager.lock:
             with self._lock:
                 last = {part: self._last.get(part) for part in parts}
-            return [part_diagnostic(manager, part, last[part], self._link_of(part)) for part in parts]
+                missed = {part: failure for part in parts
+                          if (failure := self._unpublished.pop(part, None)) is not None and failure is not last[part]}
+            found = []
+            for part in parts:
+                link = self._link_of(part)
+                if part in missed:
+                    found.append(part_diagnostic(manager, part, missed[part], link))
+                found.append(part_diagnostic(manager, part, last[part], link))
+            return found
 
     def _link_of(self, part: str) -> Any:
         if self._link is None or not isinstance(self._manager.model.parts[part], NodePart):
@@ -313,7 +328,10 @@ class DiagnosticsPublisher:
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
         if not parts or self._closed or not self._publisher.get_subscription_count():
-            return  # nobody reads it (a volatile topic): a reader that comes gets all within `period`
+            with self._lock:  # nobody reads it (a volatile topic): a reader that comes gets all within `period`,
+                for part in parts:  # as they are then
+                    self._unpublished.pop(part, None)
+            return
         message = DiagnosticArray()
         message.header.stamp = self._node.get_clock().now().to_msg()
         message.status = [

@@ -17,6 +17,7 @@ import pytest
 from model_files import bundled
 from ros_processes import NodeProcess, RosContext, Starter, Starved, wait_until
 
+from sm_bt.engine.requests import Request
 from sm_bt.model.states import State
 from sm_bt.ros.backend import RosBackend
 from sm_bt.ros.liveness import MAX_WINDOW
@@ -384,6 +385,46 @@ def test_a_model_larger_than_a_diagnostics_message_is_published_in_pages_with_a_
     finally:
         publisher.close()
         ros.close()
+
+
+def test_a_failure_replaced_by_the_next_request_before_diagnostics_went_out_is_published_all_the_same(
+        ros_context: RosContext) -> None:
+    """A failed request, then at once the next request of the part, both before the
+    gathering is published: the failure goes out too, before the part's status now (a client waiting
+    for the failed request reads it there). Seen under load: the failure never reached the wire."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from sm_bt.engine.clock import VirtualClock
+    from sm_bt.engine.lifecycle import Transition
+    from sm_bt.ros.diagnostics import DiagnosticsPublisher
+    from sm_bt.sim import SimulatedSystem
+
+    received: list[Any] = []
+    ros_context.node.create_subscription(DiagnosticArray, "/diagnostics_replaced",
+                                         lambda message: received.append(message), 100)
+    rig = SimulatedSystem(bundled("pilot"), rules=False, recovery=False)
+    rig.finish(rig.manager.change_state("pilot", "configure"))
+    clock = VirtualClock()  # the publisher's gatherings happen when this test says
+    publisher = DiagnosticsPublisher(ros_context.node, rig.manager, clock, topic="/diagnostics_replaced")
+    try:
+        wait_until(lambda: publisher._publisher.get_subscription_count() > 0, 5.0, "no reader matched")
+        clock.advance(0.0)
+        rig.backend.fail_next("amcl", Transition.ACTIVATE)
+        failed = rig.finish(rig.manager.change_mode("pilot", "f_normal_mode"))
+        following = rig.manager.change_state("pilot", "configure")
+        assert failed.done and not failed.succeeded and not following.done
+        clock.advance(0.0)
+
+        def told(request: Request) -> list[Any]:
+            return [status for message in list(received) for status in message.status
+                    if status.hardware_id == "pilot" and _values(status)["last_request"].startswith(f"#{request.id} ")]
+
+        wait_until(lambda: told(failed) and told(following), 5.0, "not both on the wire")
+        assert _values(told(failed)[0])["last_request_outcome"] == "failed" and told(failed)[0].level == b"\x02"
+        assert _values(told(following)[-1])["last_request_outcome"] == "running"
+    finally:
+        publisher.close()
+        rig.close()
 
 
 def test_a_manager_that_stood_still_itself_does_not_take_its_nodes_for_gone(
