@@ -17,7 +17,6 @@ import os
 import re
 import signal
 import subprocess
-import sys
 import threading
 import time
 import weakref
@@ -28,6 +27,7 @@ from typing import IO, Any
 import pytest
 
 from sm_bt.ros.node_process import READY_TIMEOUT, NodesError, NodesProcess
+from sm_bt.ros.node_process import ManagerProcess as LibraryManagerProcess
 
 DISCOVERY_TIMEOUT = 10.0
 DISCOVERY_POLL = 0.02
@@ -294,13 +294,13 @@ LOG_LINE = re.compile(r"^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[\d+\.\d{6}(?:\d{3})
 # -- the manager's process -----------------------------------------------------------------------------
 
 
-class ManagerProcess(NodeProcess):
-    """``python -m sm_bt.cli manager MODEL ARGS...``: ready once it says what it serves; stopped by
-    PID like every ROS process of the tests (SIGINT, then SIGKILL); its stderr is kept whole."""
+class ManagerProcess(NodeProcess, LibraryManagerProcess):
+    """``python -m sm_bt.cli manager MODEL ARGS...`` (the library's, with the tests' start): ready once it
+    says what it serves; stopped by PID like every ROS process of the tests (SIGINT, then SIGKILL); its
+    stderr is kept whole."""
 
     def __init__(self, model: str, *args: str) -> None:
-        super().__init__(model)
-        self.command = [sys.executable, "-m", "sm_bt.cli", "manager", model, *args]
+        super().__init__(model, *args)
         self._stderr = collections.deque(maxlen=20_000)
         self._starter: threading.Thread | None = None
         self._failure: BaseException | None = None
@@ -329,13 +329,6 @@ class ManagerProcess(NodeProcess):
     def join_starter(self) -> None:
         if self._starter is not None:
             self._starter.join(READY_TIMEOUT + 10.0)
-
-    def _read(self, stream: IO[str], lines: collections.deque[str], watch_ready: bool) -> None:
-        for line in stream:
-            lines.append(line.rstrip("\n"))
-            if watch_ready and line.startswith("mode manager "):
-                self._ready.set()
-        stream.close()
 
     def log(self) -> list[tuple[str, str, str]]:
         """(severity, logger, message) of every log line on stderr so far."""
