@@ -44,26 +44,24 @@ from typing import Any
 
 from bench.figures import Figure
 from bench.ros import _cpu_seconds
-from bench.ros_baseline import SpunClient, confirmed, freeze_garbage
+from bench.ros_baseline import confirmed, freeze_garbage
+from bench.ros_fleet_client import (
+    RESPONSE_PATH_GRACE,
+    ROBOT_MODE,
+    ROBOT_SYSTEM,
+    TIMEOUT,
+    RobotsClient,
+    wait_for,
+)
 from bench.ros_fleet_process import FleetAsker, process_switches
 from bench.ros_plant import start_one
 from sm_bt.model.states import State
 from sm_bt.ros.node_process import ManagerProcess, NodesError, NodesProcess
 
 FLEET = "fleet"
-ROBOT_SYSTEM = "pilot"
-#: The fleet's modes, and the mode each asks of every robot's ``pilot``.
-ROBOT_MODE = {"__DEFAULT__": "__DEFAULT__", "NIGHT": "f_energy_saving_mode"}
 SWITCH_GOAL, CUT_GOAL, HEAL_GOAL, IDLE_GOAL = 1.5, 1.0, 2.0, 2.0
-#: Seconds any one wait may take (a request, a batch of calls, discovery).
-TIMEOUT = 20.0
 #: Seconds to start the robots' processes (all at once, on two cores).
 START_LIMIT = 90.0
-#: Seconds one query of a robot's or the fleet's manager may take.
-CALL_TIMEOUT = 2.0
-#: A new client's first request that must not be asked twice waits this long after discovery (the
-#: server's path back to a new client is matched a moment after the client sees the service).
-RESPONSE_PATH_GRACE = 0.3
 #: lifecycle_msgs/msg/State's id of active.
 ACTIVE = 3
 #: Seconds for the domain to calm down after the fleet's process joins or leaves it (every participant
@@ -92,16 +90,6 @@ def _other(mode: str) -> str:
     return "NIGHT" if mode == "__DEFAULT__" else "__DEFAULT__"
 
 
-def _wait(condition: Callable[[], bool], what: str, limit: float = TIMEOUT, poll: float = 0.005) -> float:
-    """Poll ``condition`` until true; the seconds it took, or ``RuntimeError(what)`` after ``limit``."""
-    began = time.perf_counter()
-    while not condition():
-        if time.perf_counter() - began > limit:
-            raise RuntimeError(f"{what}: not within {limit:g} s")
-        time.sleep(poll)
-    return time.perf_counter() - began
-
-
 # -- the processes ----------------------------------------------------------------------------------------
 
 
@@ -128,135 +116,6 @@ def _stop_all(processes: Sequence[NodesProcess]) -> None:
             list(pool.map(lambda process: process.stop(), processes))
 
 
-# -- the plain rclpy client ----------------------------------------------------------------------------
-
-
-class _Client(SpunClient):
-    """A plain rclpy client of the robots' managers (and of a fleet manager process): one node,
-    one ``SingleThreadedExecutor`` spun by one thread throughout; every call has a timeout."""
-
-    def __init__(self, robots: Sequence[str], name: str) -> None:
-        from lifecycle_msgs.srv import GetState
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-        from system_modes_msgs.msg import ModeEvent
-        from system_modes_msgs.srv import ChangeMode, GetMode
-
-        self.robots = list(robots)
-        super().__init__(name)
-        self.change_mode = {r: self.node.create_client(ChangeMode, f"/{r}/{ROBOT_SYSTEM}/change_mode") for r in robots}
-        self.get_state = {r: self.node.create_client(GetState, f"/{r}/{ROBOT_SYSTEM}/get_state") for r in robots}
-        self.get_mode = {r: self.node.create_client(GetMode, f"/{r}/{ROBOT_SYSTEM}/get_mode") for r in robots}
-        self._lock = threading.Lock()
-        self._watching: dict[str, float] = {}  # robot -> when its mode_event said the mode awaited
-        self._awaited = ""
-        self._events = threading.Event()
-        # As the fleet's backend subscribes (sm_bt.ros.remote_parts): reliable, volatile.
-        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-        self.subscriptions = [self.node.create_subscription(
-            ModeEvent, f"/{r}/{ROBOT_SYSTEM}/mode_event", functools.partial(self._mode_event, r), qos)
-            for r in robots]
-        self.spin()
-
-    def _mode_event(self, robot: str, message: Any) -> None:
-        now = time.perf_counter()
-        with self._lock:
-            if str(message.goal_mode.label) == self._awaited and robot not in self._watching:
-                self._watching[robot] = now
-                if len(self._watching) == len(self.robots):
-                    self._events.set()
-
-    def ready(self, *, events: bool = True) -> float:
-        """Wait until every robot's services are discovered and (``events``) every ``mode_event``
-        subscription is matched; the seconds it took."""
-        clients = [*self.change_mode.values(), *self.get_state.values(), *self.get_mode.values()]
-
-        def found() -> bool:
-            return (all(client.service_is_ready() for client in clients)
-                    and (not events or all(s.get_publisher_count() > 0 for s in self.subscriptions)))
-
-        try:
-            took = _wait(found, "the robots' managers discovered", TIMEOUT, 0.02)
-        except RuntimeError:
-            missing = [c.srv_name for c in clients if not c.service_is_ready()]
-            missing += [s.topic_name for s in self.subscriptions if events and s.get_publisher_count() == 0]
-            raise RuntimeError(f"not discovered within {TIMEOUT:g} s: {', '.join(missing[:4])}"
-                               f"{' ...' if len(missing) > 4 else ''}") from None
-        time.sleep(RESPONSE_PATH_GRACE)
-        return took
-
-    def call(self, client: Any, request: Any, timeout: float = CALL_TIMEOUT) -> Any:
-        """The response of ``client`` to ``request``; ``RuntimeError`` after ``timeout`` s."""
-        done = threading.Event()
-        future = client.call_async(request)
-        future.add_done_callback(lambda _future: done.set())
-        if not done.wait(timeout):
-            client.remove_pending_request(future)
-            raise RuntimeError(f"{client.srv_name}: no answer within {timeout:g} s")
-        error = future.exception()
-        if error is not None:
-            raise RuntimeError(f"{client.srv_name}: {error!r}")
-        return future.result()
-
-    def switch(self, fleet_mode: str, *, answers: bool = True) -> float:
-        """Every robot's ``change_mode`` at once; seconds until every ``mode_event`` says the mode
-        and (``answers``) every answer has come, successful."""
-        from system_modes_msgs.srv import ChangeMode
-
-        mode = ROBOT_MODE[fleet_mode]
-        request = ChangeMode.Request(mode_name=mode)
-        answered: dict[str, float] = {}
-        refused: list[str] = []
-        all_answered = threading.Event()
-
-        def answer(robot: str, future: Any) -> None:
-            now = time.perf_counter()
-            error = future.exception()
-            with self._lock:
-                if error is not None or not future.result().success:
-                    refused.append(f"{robot}: {error!r}" if error is not None else f"{robot} refused {mode}")
-                answered[robot] = now
-                if len(answered) == len(self.robots):
-                    all_answered.set()
-
-        with self._lock:
-            self._watching, self._awaited = {}, mode
-            self._events.clear()
-        futures = {}
-        began = time.perf_counter()
-        for robot in self.robots:
-            future = self.change_mode[robot].call_async(request)
-            future.add_done_callback(lambda future, robot=robot: answer(robot, future))
-            futures[robot] = future
-        ok = self._events.wait(TIMEOUT) and (not answers or all_answered.wait(max(0.0, began + TIMEOUT
-                                                                                  - time.perf_counter())))
-        with self._lock:
-            events, self._awaited = dict(self._watching), ""
-        for robot, future in futures.items():
-            if robot not in answered:
-                self.change_mode[robot].remove_pending_request(future)
-        if not ok:
-            raise RuntimeError(f"the robots' own switch to {mode}: after {TIMEOUT:g} s no mode_event from "
-                               f"{sorted(set(self.robots) - set(events))}, no answer from "
-                               f"{sorted(set(self.robots) - set(answered)) if answers else '(not awaited)'}")
-        if refused:
-            raise RuntimeError(f"the robots' own switch to {mode}: {refused[0]}")
-        ends = [*events.values(), *(answered.values() if answers else [])]
-        return max(ends) - began
-
-    def robot_view(self, robot: str) -> tuple[State, str]:
-        """``robot``'s state and mode as its own manager answers them."""
-        from lifecycle_msgs.srv import GetState
-        from system_modes_msgs.srv import GetMode
-
-        state = self.call(self.get_state[robot], GetState.Request()).current_state.id
-        mode = self.call(self.get_mode[robot], GetMode.Request()).current_mode
-        try:
-            return State(int(state)), str(mode)
-        except ValueError:
-            return State.UNKNOWN, str(mode)
-
-
-
 # -- the fleet's side --------------------------------------------------------------------------------
 
 
@@ -268,7 +127,7 @@ def _fleet_runtime(model: Any, robots: Sequence[str]) -> Any:
     try:
         manager = runtime.manager
         try:
-            _wait(lambda: all(manager.actual(r).known for r in robots), "the fleet reads its robots", TIMEOUT, 0.01)
+            wait_for(lambda: all(manager.actual(r).known for r in robots), "the fleet reads its robots", TIMEOUT, 0.01)
         except RuntimeError:
             missing = [f"{r} ({manager.observation(r).gone or 'never read'})" for r in robots
                        if not manager.actual(r).known]
@@ -305,9 +164,9 @@ def _fleet_block(model: Any, robots: Sequence[str], at: str, switches: int) -> t
 
 
 def _floor_block(robots: Sequence[str], at: str, switches: int) -> tuple[list[float], str, float]:
-    """The same with a fresh plain client (see :class:`_Client`)."""
+    """The same with a fresh plain client (see :class:`RobotsClient`)."""
     began = time.perf_counter()
-    client = _Client(robots, "sm_bt_bench_fleet_floor")
+    client = RobotsClient(robots, "sm_bt_bench_fleet_floor")
     try:
         client.ready()
         up = time.perf_counter() - began
@@ -347,7 +206,7 @@ def run(quick: bool) -> list[Figure]:
                  for r in robots]
         fleet_process: ManagerProcess | None = None
         runtime: Any = None
-        client: _Client | None = None
+        client: RobotsClient | None = None
         try:
             began = time.perf_counter()
             _start_all([*managers, *nodes])
@@ -365,7 +224,7 @@ def run(quick: bool) -> list[Figure]:
 
             # Cut and heal, with a fresh fleet runtime whose target is NIGHT.
             runtime = _fleet_runtime(model, robots)
-            client = _Client(robots, "sm_bt_bench_fleet_checker")
+            client = RobotsClient(robots, "sm_bt_bench_fleet_checker")
             client.ready(events=False)
             _confirmed(runtime.manager, lambda: runtime.manager.change_mode(FLEET, "NIGHT"))
             figures += _cuts(runtime.manager, client, managers, robots, cycles, clock)
@@ -417,7 +276,8 @@ def _switches(model: Any, robots: Sequence[str], at: str, rounds: int, switches:
 
 
 
-def _process_switches(process: ManagerProcess, client: _Client, rounds: int, switches: int, clock: float) -> Figure:
+def _process_switches(process: ManagerProcess, client: RobotsClient, rounds: int, switches: int,
+                      clock: float) -> Figure:
     """Row 5: the fleet's switch across processes (bench/ros_fleet_process.py), from __DEFAULT__."""
     client.ready()
     asker = FleetAsker(client.node, FLEET)
@@ -439,7 +299,7 @@ def _process_switches(process: ManagerProcess, client: _Client, rounds: int, swi
         asker.close()
 
 
-def _cuts(manager: Any, client: _Client, managers: Sequence[ManagerProcess], robots: Sequence[str], cycles: int,
+def _cuts(manager: Any, client: RobotsClient, managers: Sequence[ManagerProcess], robots: Sequence[str], cycles: int,
           clock: float) -> list[Figure]:
     """Rows 2 and 3: a robot's manager frozen until the fleet says unknown, then resumed until the
     fleet agrees with it again; a different robot each cycle."""
@@ -463,7 +323,7 @@ def _cuts(manager: Any, client: _Client, managers: Sequence[ManagerProcess], rob
                 seen.append(time.perf_counter())
                 unknown.set()
 
-        _wait(functools.partial(_agree, manager, client, robot), f"the fleet agrees with {robot} before the cut")
+        wait_for(functools.partial(_agree, manager, client, robot), f"the fleet agrees with {robot} before the cut")
         with manager.lock:  # subscribed and checked with no event in between
             if not manager.actual(robot).known:
                 raise RuntimeError(f"{robot} unknown at the fleet before its cut: {manager.actual(robot)}")
@@ -482,7 +342,8 @@ def _cuts(manager: Any, client: _Client, managers: Sequence[ManagerProcess], rob
                 resumed = time.perf_counter()
         finally:
             subscription.cancel()
-        _wait(functools.partial(_agree, manager, client, robot), f"the fleet agrees with {robot} after the heal", 15.0)
+        wait_for(functools.partial(_agree, manager, client, robot), f"the fleet agrees with {robot} after the heal",
+                 15.0)
         heal.append(time.perf_counter() - resumed)
         views.append(str(manager.actual(robot)))
         # Still agreed a second later? (The robot's own manager was frozen too: its own liveness
@@ -513,7 +374,7 @@ def _cuts(manager: Any, client: _Client, managers: Sequence[ManagerProcess], rob
                                        "views": views, "relapses_within_1s": relapses})]
 
 
-def _agree(manager: Any, client: _Client, robot: str) -> bool:
+def _agree(manager: Any, client: RobotsClient, robot: str) -> bool:
     """The fleet knows ``robot`` and its view equals what the robot's own manager answers (state, and
     mode when active), unchanged while the robot was asked."""
     view = manager.actual(robot)
@@ -527,7 +388,7 @@ def _agree(manager: Any, client: _Client, robot: str) -> bool:
             and manager.actual(robot) == view)
 
 
-def _idle(process: ManagerProcess, client: _Client, robots: Sequence[str], managers: Sequence[ManagerProcess],
+def _idle(process: ManagerProcess, client: RobotsClient, robots: Sequence[str], managers: Sequence[ManagerProcess],
           settle: float, window: float, clock: float) -> Figure:
     """Row 4: ``sm-bt manager FLEET.yaml`` brought up through ``/fleet/change_mode``, then idle. The
     robots' own managers are measured over the same window, for comparison (each answers the
@@ -546,7 +407,7 @@ def _idle(process: ManagerProcess, client: _Client, robots: Sequence[str], manag
     get_state = client.node.create_client(GetState, f"/{FLEET}/get_state")
     get_mode = client.node.create_client(GetMode, f"/{FLEET}/get_mode")
     change_mode = client.node.create_client(ChangeMode, f"/{FLEET}/change_mode")
-    _wait(lambda: all(c.service_is_ready() for c in (get_state, get_mode, change_mode)),
+    wait_for(lambda: all(c.service_is_ready() for c in (get_state, get_mode, change_mode)),
           "the fleet manager process's services discovered", TIMEOUT, 0.02)
 
     def fleet_view() -> tuple[int, str]:
@@ -556,12 +417,12 @@ def _idle(process: ManagerProcess, client: _Client, robots: Sequence[str], manag
         except RuntimeError:
             return 0, ""
 
-    _wait(lambda: fleet_view()[0] != 0, "the fleet manager process reads its robots", TIMEOUT, 0.05)
+    wait_for(lambda: fleet_view()[0] != 0, "the fleet manager process reads its robots", TIMEOUT, 0.05)
     time.sleep(RESPONSE_PATH_GRACE)
     answer = client.call(change_mode, ChangeMode.Request(mode_name="__DEFAULT__"), 5.0)
     if not answer.success:
         raise RuntimeError("the fleet manager process refused change_mode __DEFAULT__")
-    _wait(lambda: fleet_view() == (ACTIVE, "__DEFAULT__"), "the fleet manager process reaches __DEFAULT__", TIMEOUT,
+    wait_for(lambda: fleet_view() == (ACTIVE, "__DEFAULT__"), "the fleet manager process reaches __DEFAULT__", TIMEOUT,
           0.05)
     modes = {robot: client.robot_view(robot) for robot in robots}
     wrong = {robot: view for robot, view in modes.items() if view != (State.ACTIVE, "__DEFAULT__")}

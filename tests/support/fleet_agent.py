@@ -50,7 +50,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # bench, beside sm_bt
 
 from bench.ros_baseline import freeze_garbage
-from bench.ros_fleet import ROBOT_MODE, _Client
+from bench.ros_fleet_client import ROBOT_MODE, RobotsClient
 
 FLEET = "fleet"
 #: Seconds one question of the ``agree`` loop may wait (a robot just plugged back may not answer yet).
@@ -79,7 +79,7 @@ class Agent:
         from system_modes_msgs.srv import GetMode
 
         self.robots = [f"robot{k}" for k in range(1, robots + 1)]
-        self.client = _Client(self.robots, "sm_bt_fleet_agent")
+        self.client = RobotsClient(self.robots, "sm_bt_fleet_agent")
         node = self.client.node
         self.lock = threading.RLock()  # fleet_view() is asked under _wait()
         self.changed = threading.Condition(self.lock)
