@@ -537,3 +537,23 @@ def test_served_by_sm_bt_a_robot_between_modes_is_asked_for_its_target_and_one_w
         assert manager.observation("robot1").gone == "the manager of robot1 does not know where /robot1/pilot is"
     finally:
         runtime.close()
+
+
+def test_a_mode_accepted_that_its_manager_reported_already_is_not_read_again(
+        ros_context: RosContext, tmp_path: Path) -> None:
+    """Its mode event usually comes before the answer to the request: nothing is left to confirm, and
+    the reads would land on the fleet's next switch. A mode not reported yet is read at the probes' pace."""
+    from sm_bt.ros.remote_parts import RemoteBackend
+
+    path = tmp_path / "fleet.yaml"
+    path.write_text(FLEET.format(extra=""), encoding="utf-8")
+    backend = RemoteBackend(ros_context.node, load_model(path))
+    try:
+        robot = backend._robots["robot1"]  # what the fleet knows of it, as its events left it
+        robot.present, robot.state, robot.mode, robot.lively = True, State.ACTIVE, "f_performance_mode", True
+        backend._accepted(robot, "f_performance_mode")
+        assert (robot.asked, robot.timer) == (None, None)
+        backend._accepted(robot, "f_normal_mode")
+        assert robot.asked == "f_normal_mode" and robot.timer is not None
+    finally:
+        backend.clock.close()
