@@ -338,8 +338,14 @@ def test_a_plain_client_changes_the_mode_of_actuation_and_sees_mode_event(
     ros.node.create_subscription(TransitionEvent, "/actuation/transition_event", transitions.append, LATCHED)
     ros.wait_for([change_mode, get_mode, modes, change_state, get_state, states], timeout=20.0)
     # The manager must have found the nodes before the modes can be inferred.
-    wait_until(lambda: call(get_state, GetState.Request(), 2.0).current_state.id == StateMsg.PRIMARY_STATE_UNCONFIGURED,
-               20.0, "actuation never inferred unconfigured")
+
+    def state_id() -> int | None:
+        try:
+            return int(call(get_state, GetState.Request(), 2.0).current_state.id)
+        except AssertionError:  # no answer: a new client's first one may be lost to discovery (seen under load)
+            return None
+
+    wait_until(lambda: state_id() == StateMsg.PRIMARY_STATE_UNCONFIGURED, 20.0, "actuation never inferred unconfigured")
 
     assert call(modes, GetAvailableModes.Request(), 2.0).available_modes == ["MODERATE", "PERFORMANCE", "__DEFAULT__"]
     assert [s.label for s in call(states, GetAvailableStates.Request(), 2.0).available_states] == \
@@ -368,8 +374,7 @@ def test_a_plain_client_changes_the_mode_of_actuation_and_sees_mode_event(
     # change_state by id, as the reference's clients send it.
     request = ChangeState.Request(transition=TransitionMsg(id=TransitionMsg.TRANSITION_DEACTIVATE))
     assert call(change_state, request, 2.0).success is True
-    wait_until(lambda: call(get_state, GetState.Request(), 2.0).current_state.id == StateMsg.PRIMARY_STATE_INACTIVE,
-               10.0, "actuation never became inactive")
+    wait_until(lambda: state_id() == StateMsg.PRIMARY_STATE_INACTIVE, 10.0, "actuation never became inactive")
     # An id that is not a transition at all is refused, not a crash.
     assert call(change_state, ChangeState.Request(transition=TransitionMsg(id=99)), 2.0).success is False
     assert call(get_mode, GetMode.Request(), 2.0).current_mode == ""
