@@ -157,10 +157,9 @@ class RobotCalls:
                 failed(why)
 
         limit = timeout if timeout is not None else self.call_timeout
-        if owed:
+        if owed:  # before it can end: its callbacks are not attached yet
             with self._lock:
-                if not ended[0]:  # not answered already
-                    robot.owed[key] = given_up
+                robot.owed[key] = given_up
         future.add_done_callback(on_done)
         self._clock.call_later(limit, lambda: given_up(f"the manager of {robot.part} did not answer {label} "
                                                         f"within {limit:g} s"))
