@@ -19,6 +19,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import FrameType
 from typing import IO
 
 from sm_bt.model.errors import Error
@@ -39,6 +42,24 @@ def stop_process(process: subprocess.Popen[str], grace: float = STOP_GRACE) -> i
             process.kill()
             process.wait(5.0)
     return process.returncode
+
+
+@contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While it is entered, SIGTERM unwinds like Ctrl-C (in the main thread), so that the child
+    processes started meanwhile are still stopped."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: FrameType | None) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 class NodesError(Error, RuntimeError):

@@ -8,10 +8,18 @@ session's ROS environment (conftest: local discovery, a domain id of this run's 
 
 from __future__ import annotations
 
+import contextlib
 import io
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 from rich.console import Console
+from ros_processes import DUMPABLE, communicate_or_dump
 from tree_helpers import assert_in_order
 
 from sm_bt.cli import main
@@ -77,3 +85,38 @@ def test_the_simulated_fleet_demo_tells_the_same_story() -> None:
 def test_the_fleet_demo_on_ros_runs_in_real_time(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["demo", "--fleet", "--ros", "--speed", "0"]) == 2
     assert "--fleet --ros runs in real time: --speed paces the simulated fleet only" in capsys.readouterr().err
+
+
+def test_sigterm_stops_the_fleet_demo_on_ros_and_every_robot_process() -> None:
+    """An operator's ``kill`` (SIGTERM) mid-shift unwinds as Ctrl-C does: the robots' four processes stop too."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **DUMPABLE}
+    demo = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "demo", "--fleet", "--ros"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    children: list[int] = []
+    try:
+        assert demo.stdout is not None
+        deadline = time.monotonic() + 60.0
+        for line in demo.stdout:  # the set-up says the robots' pids, then the shift starts
+            if "robots started:" in line:
+                children = [int(pid) for pid in re.findall(r"pid (\d+)", line)]
+            if "fleet shift over" in line or time.monotonic() > deadline:
+                break
+        assert len(children) == 4, demo.stderr.read() if demo.stderr else ""
+        demo.send_signal(signal.SIGTERM)
+        _, err = communicate_or_dump(demo, 20.0)
+        assert demo.returncode == 130 and "sm-bt: interrupted" in err, err
+        for pid in children:
+            with pytest.raises(ProcessLookupError):
+                os.kill(pid, 0)
+        children = []  # gone: their pids are not ours any more
+    finally:
+        if demo.poll() is None:  # only if the test failed half-way: SIGINT, then SIGKILL
+            demo.send_signal(signal.SIGINT)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                demo.wait(5.0)
+            if demo.poll() is None:
+                demo.kill()
+                demo.wait(5.0)
+        for pid in children:  # still there (the demo left them): by the pids it gave
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)

@@ -27,7 +27,7 @@ from sm_bt.model.errors import Error
 from sm_bt.model.loader import load_model
 from sm_bt.ros.client import ModeClient, Outcome, follow_outcomes
 from sm_bt.ros.environment import prepare, require_ros
-from sm_bt.ros.node_process import ManagerProcess, NodesError, NodesProcess
+from sm_bt.ros.node_process import ManagerProcess, NodesError, NodesProcess, sigterm_as_interrupt
 from sm_bt.ros.runtime import RosRuntime
 from sm_bt.trees.fleet.platforms import ROBOT_MODEL, ROBOTS, RobotTeller
 
@@ -52,6 +52,7 @@ class RosFleet:
         self._closed = False
         self._began = time.monotonic()
         with ExitStack() as stack:
+            stack.enter_context(sigterm_as_interrupt())  # kept until close(): the robots stop then too
             # The children inherit the environment: local discovery, a domain id of this run's own unless
             # the user chose one.
             prepare(own_domain=True)
@@ -73,7 +74,8 @@ class RosFleet:
             self._wait_for_robots()
             say(f"the fleet's manager {FLEET_NODE} has read {', '.join(self.robots)} "
                 f"({time.monotonic() - self._began:.1f} s)")
-            self._asking = self._robot_view()
+            # The robots' own managers are asked by a node of its own in the runtime's context (spun in its calls).
+            self._asking = ModeClient(timeout=CALL_TIMEOUT, node_name="fleet_demo_robots", context=self.runtime.context)
             stack.callback(self._asking.close)
             self._subscriptions: list[Any] = []
             self._began = time.monotonic()
@@ -89,10 +91,6 @@ class RosFleet:
                           for robot in self.robots if not self.manager.actual(robot).known]
                 raise NodesError(f"the fleet did not read {', '.join(unread)} within {DISCOVERY_TIMEOUT:.0f} s")
             time.sleep(0.05)
-
-    def _robot_view(self) -> ModeClient:
-        """Asks the robots' own managers (a node of its own in the runtime's context, spun in its calls)."""
-        return ModeClient(timeout=CALL_TIMEOUT, node_name="fleet_demo_robots", context=self.runtime.context)
 
     @property
     def processes(self) -> list[NodesProcess]:

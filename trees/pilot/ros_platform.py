@@ -10,12 +10,9 @@ laser_resender does).
 
 from __future__ import annotations
 
-import signal
-import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
-from contextlib import ExitStack, contextmanager
-from types import FrameType
+from collections.abc import Callable, Mapping
+from contextlib import ExitStack
 from typing import Any
 
 import py_trees
@@ -24,7 +21,7 @@ from sm_bt.engine.manager import ModeManager
 from sm_bt.model.types import Model, ParamValue
 from sm_bt.ros.blackboard_streams import BlackboardStreams
 from sm_bt.ros.environment import prepare, require_ros
-from sm_bt.ros.node_process import NodesError, NodesProcess
+from sm_bt.ros.node_process import NodesError, NodesProcess, sigterm_as_interrupt
 from sm_bt.ros.runtime import MANAGER_NODE_NAME, RosRuntime
 from sm_bt.ros.snapshot_streams import SnapshotStreams
 from sm_bt.trees.pilot.world import World
@@ -35,23 +32,6 @@ TICK = 0.02  # wall seconds between ticks of the tree
 #: The backend's options: short enough that a dead node process shows quickly.
 BACKEND_OPTIONS: dict[str, Any] = {"call_timeout": CALL_TIMEOUT, "acquire_timeout": 2.0, "liveness_timeout": 2.0}
 BROKEN = "sim.broken"  # sm_bt.ros.sim_nodes.BROKEN (not imported: that module starts rclpy's C side)
-
-
-@contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
-    """While the demo runs, SIGTERM unwinds like Ctrl-C, so that the node process is still stopped."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum: int, frame: FrameType | None) -> None:
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 class RosPlatform:
@@ -78,7 +58,7 @@ class RosPlatform:
         self._closed = False
         self._streams: tuple[SnapshotStreams, BlackboardStreams] | None = None
         with ExitStack() as stack:
-            stack.enter_context(_sigterm_as_interrupt())
+            stack.enter_context(sigterm_as_interrupt())
             # The child inherits the environment: local discovery, and a domain id of this run's own
             # unless the user chose one.
             prepare(own_domain=True)
