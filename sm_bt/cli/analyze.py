@@ -11,7 +11,7 @@ import json
 import sys
 
 from sm_bt.analysis import Analysis, Level, analyze
-from sm_bt.cli.common import add_lenient, bundled_names, load_or_report, plural
+from sm_bt.cli.common import add_lenient, bundled_names, load_or_report, plural, shipped_nodes
 from sm_bt.trees.mission_xml import check_tree
 
 
@@ -32,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_or_report(args.model, strict=not args.lenient)
     if model is None:
         return 1
+    shipped_nodes()
     issues = [issue for tree in args.trees for issue in check_tree(tree, model=model)]
     if issues:  # the analysis reads trees that load
         for issue in issues:

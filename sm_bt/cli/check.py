@@ -33,6 +33,7 @@ from sm_bt.cli.common import (
     plural,
     print_issues,
     report_failed,
+    shipped_nodes,
 )
 from sm_bt.model.types import Model, Severity
 from sm_bt.trees.stubs import Stub
@@ -240,8 +241,9 @@ def _check_scenario(path: str, lenient: bool) -> bool:
 
 def _check_tree_file(tree: str, models: list[tuple[str, Model]], stubs: dict[str, Stub]) -> bool:
     """Check ``tree`` against each of ``models`` (or alone, without one); print what was found."""
-    import sm_bt.trees.pilot  # noqa: F401 (registers the pilot's actions, which shipped trees use)
     from sm_bt.trees.mission_xml import check_tree
+
+    shipped_nodes()
 
     against: list[tuple[str, Model | None]] = list(models) or [("", None)]
     ok = True

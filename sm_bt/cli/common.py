@@ -4,6 +4,7 @@ command, and finding and loading a model by path or bundled name."""
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -46,14 +47,33 @@ def check_request(model: Model, part: str, value: str, option: str, model_name: 
 
 @dataclass(frozen=True)
 class Command:
-    """One subcommand: ``add_arguments(parser)`` declares its arguments, ``run(args)`` returns
-    the exit code (or raises :class:`CliError`)."""
+    """One subcommand, implemented in ``module`` (imported only when the command runs or its
+    arguments are declared): its ``add_arguments(parser)`` declares the arguments, its ``run(args)``
+    returns the exit code (or raises :class:`CliError`). ``add`` and ``run_name`` name other
+    functions of the module for a module of several commands."""
 
     name: str
     help: str
-    add_arguments: Callable[[argparse.ArgumentParser], None]
-    run: Callable[[argparse.Namespace], int]
+    module: str
     description: str = ""
+    add: str = "add_arguments"
+    run_name: str = "run"
+
+    @property
+    def add_arguments(self) -> Callable[[argparse.ArgumentParser], None]:
+        found: Callable[[argparse.ArgumentParser], None] = getattr(importlib.import_module(self.module), self.add)
+        return found
+
+    @property
+    def run(self) -> Callable[[argparse.Namespace], int]:
+        found: Callable[[argparse.Namespace], int] = getattr(importlib.import_module(self.module), self.run_name)
+        return found
+
+
+def shipped_nodes() -> None:
+    """Register the pilot's actions (``<BatteryToBlackboard>``, ``<NavigateTo>``, ...) in py_trees'
+    ports registry, for every command that reads a tree file: the shipped trees use them."""
+    import sm_bt.trees.pilot  # noqa: F401
 
 
 # -- loading models ----------------------------------------------------------------------------

@@ -22,7 +22,7 @@ import signal
 from typing import Any
 
 from sm_bt.cli.arguments import non_negative, positive
-from sm_bt.cli.common import CliError, load
+from sm_bt.cli.common import CliError, load, shipped_nodes
 from sm_bt.model.errors import ModelError
 
 log = logging.getLogger("sm_bt.ros.host")
@@ -84,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
                 model = load(model_name)
             except ModelError as error:
                 raise CliError(f"the model has mistakes:\n{error}") from None
+            shipped_nodes()
             host = MissionHost(model, load_root(tree_spec, model), node, rate=rate)
             _stop_on_signals(host.stop)
             log.info("mission %s on node %s: %s at %g Hz, model %s", tree_spec, node.get_fully_qualified_name(),

@@ -26,7 +26,7 @@ import py_trees
 from py_trees.common import Status
 
 from sm_bt.cli.arguments import add_view_arguments, non_negative, positive
-from sm_bt.cli.common import CliError, UsageError, load_or_report, report_failed
+from sm_bt.cli.common import CliError, UsageError, load_or_report, report_failed, shipped_nodes
 from sm_bt.model.types import Model
 from sm_bt.scenario import Checks, MissionSystem, Scenario, SimulatedWorld, load_scenario, load_world, scenario_setup
 from sm_bt.sim import SimulatedSystem
@@ -134,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
             print(line, file=sys.stderr, flush=True)
 
     with mission_system(model, args.model, ros=args.ros, attach=args.attach, scenario=scenario, say=say) as system:
+        shipped_nodes()
         try:
             root = load_tree(args.tree, manager=system.manager, stubs=stubs)
         except TreeFileError as error:

@@ -21,7 +21,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sm_bt.cli.common import CliError, UsageError, load
+from sm_bt.cli.common import CliError, UsageError, load, shipped_nodes
 from sm_bt.cli.run import add_ros_arguments
 from sm_bt.model.errors import ModelError
 
@@ -111,6 +111,7 @@ def _one(path: str, runs: Path, *, ros: bool = False, attach: bool = False) -> O
     until = float(setup.get("until", UNTIL))
     with mission_system(model, setup["model"], ros=ros, attach=attach, scenario=scenario,
                         say=lambda line: None) as system:
+        shipped_nodes()
         try:
             root = load_tree(setup["tree"], manager=system.manager, stubs=stubs)
         except TreeFileError as error:
