@@ -67,17 +67,19 @@ def test_the_pilots_stories_ship_as_scenarios_and_pass(capsys: pytest.CaptureFix
     assert code == 0, out
     assert [line.split(":")[0] for line in out.splitlines()[:3]] == [f"PASSED {path}" for path in shipped]
     # The world's laser matters: never repaired, the pilot stays degraded and the expectation says so.
+    # (These variants stop at 50 s, past the expectation that tells: the rest of a run is 850 s of ticks.)
     never_repaired = tmp_path / "laser_failure.yaml"
     never_repaired.write_text(shipped[1].read_text().replace("tree: ../pilot.xml", f"tree: {shipped[1].parent.parent}"
                                                              "/pilot.xml").replace(
-        "  - {at: 40.0, world: {laser: repaired}}\n", ""))
+        "  - {at: 40.0, world: {laser: repaired}}\n", "").replace("until: 900", "until: 50"))
     code = main(["test", str(never_repaired), "--runs", str(tmp_path / "runs")])
     out, _ = capsys.readouterr()
     assert code == 1
     assert f"  {never_repaired}:13: at 45 s pilot is active.f_degraded_mode, expected active.f_normal_mode" in out, out
     # The rule's hold matters: the tree asking for normal mode at its own priority stays degraded.
     own_priority = tmp_path / "laser_rule.yaml"
-    own_priority.write_text(shipped[2].read_text().replace("tree: ../pilot.xml", f"tree: {tmp_path}/pilot.xml"))
+    own_priority.write_text(shipped[2].read_text().replace("tree: ../pilot.xml", f"tree: {tmp_path}/pilot.xml")
+                            .replace("until: 900", "until: 50"))
     (tmp_path / "pilot.xml").write_text((shipped[2].parent.parent / "pilot.xml").read_text().replace(
         ' priority="100"', ""))
     code = main(["test", str(own_priority), "--runs", str(tmp_path / "runs")])
