@@ -51,10 +51,12 @@ def models_dir() -> Path:
     return MODELS
 
 
-#: Modules whose tests share what a module fixture made (the ROS demo's one run) or a tally (the fuzz
-#: campaigns): under pytest-xdist one worker runs each of them whole. (xdist's own xdist_group mark
-#: groups nothing under pytest 9: it renames node ids through an attribute pytest no longer reads.)
-ONE_WORKER = frozenset({"tests/e2e/test_demo_ros.py", "tests/model/test_model_fuzz.py"})
+#: Modules whose tests share what a module fixture made (the ROS demo's one run, the demo's recording
+#: replayed, the demo's runs that tests only read) or a tally (the fuzz campaigns): under pytest-xdist
+#: one worker runs each of them whole, so that it is made once. (xdist's own xdist_group mark groups
+#: nothing under pytest 9: it renames node ids through an attribute pytest no longer reads.)
+ONE_WORKER = frozenset({"tests/e2e/test_demo_ros.py", "tests/model/test_model_fuzz.py", "tests/e2e/test_demo.py",
+                        "tests/view/test_view_replay.py"})
 
 
 @pytest.hookimpl(optionalhook=True)

@@ -7,7 +7,7 @@
 #
 # Most of the suite's time is ROS tests waiting on other processes, so it runs in more workers
 # than there are cores (pytest-xdist; each worker has a ROS domain of its own, see tests/conftest.py).
-# Tests that share a costly module fixture (a recorded demo) name an xdist_group: one worker runs them.
+# Modules whose tests share a costly fixture (a recorded demo) run whole in one worker (tests/conftest.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -51,7 +51,7 @@ next_step tests
 # blocked where no signal reaches it), it is interrupted after 15 minutes rather than running into
 # CI's limit with nothing said.
 SM_BT_TESTS_NEED_ALL=1 timeout --signal=INT --kill-after=30 900 \
-  "$venv/bin/python" -m pytest -q -n "$workers" --dist loadgroup --durations=10 "$@"
+  "$venv/bin/python" -m pytest -q -n "$workers" --durations=10 "$@"
 
 next_step lint
 "$make" --no-print-directory lint

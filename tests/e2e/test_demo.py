@@ -24,16 +24,11 @@ def run_demo(**options: object) -> tuple[int, str, Demo]:
 
 @functools.cache
 def shared_run(tree: str) -> tuple[int, str, Demo]:
-    """The default demo of ``tree``, run once for the tests that only read it (the same worker runs
-    them all: :data:`SHARED`)."""
+    """The default demo of ``tree``, run once for the tests that only read it (one pytest-xdist
+    worker runs this module: tests/conftest.py)."""
     return run_demo(tree=tree)
 
 
-#: The tests that read :func:`shared_run` go to one pytest-xdist worker (``--dist loadgroup``).
-SHARED = pytest.mark.xdist_group("demo_shared_run")
-
-
-@SHARED
 @pytest.mark.parametrize("tree", ["pilot", "metacontrol"])
 def test_demo_tells_the_whole_story(tree: str) -> None:
     code, text, demo = shared_run(tree)
@@ -89,7 +84,6 @@ def first(lines: list[Line], pattern: str, start: int = 0) -> int:
     return next(i for i in range(start, len(lines)) if re.search(pattern, lines[i][1]))
 
 
-@SHARED
 @pytest.mark.parametrize("tree", ["pilot", "metacontrol"])
 def test_the_narration_is_true_in_causal_order_and_names_who_asked(tree: str) -> None:
     code, text, _ = shared_run(tree)
@@ -139,7 +133,6 @@ def test_the_narration_is_true_in_causal_order_and_names_who_asked(tree: str) ->
     assert "user requests" not in summary
 
 
-@SHARED
 def test_tree_dumps_show_feedback_only_for_what_the_tick_visited_and_conditions_in_words() -> None:
     _, text, _ = shared_run("pilot")
     dumps = [line for line in text.splitlines() if re.match(r"^\s*(-->|\[o\]|\[-\]|\{-\}|\{o\}|/_/|-\^-) ", line)]
@@ -187,7 +180,6 @@ def test_bad_options_are_usage_errors(argv: list[str], capsys: pytest.CaptureFix
     assert "Traceback" not in capsys.readouterr().err
 
 
-@SHARED
 def test_the_xml_pilot_tree_runs_the_same_demo_as_the_python_one() -> None:
     from sm_bt.trees import pilot
 

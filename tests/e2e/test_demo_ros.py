@@ -90,9 +90,6 @@ class _TreeWatcher:
         self._thread.join(10.0)
 
 
-#: The tests that read the shared run go to one pytest-xdist worker (``--dist loadgroup``): it runs once.
-SHARED_RUN = pytest.mark.xdist_group("ros_demo")
-
 
 @pytest.fixture(scope="module")
 def ros_demo() -> Iterator[tuple[int, str, Demo, float, list[Any]]]:
@@ -113,7 +110,6 @@ def pilot_modes(demo: Demo) -> list[str]:
     return [mode for _, mode in demo.tally.modes]
 
 
-@SHARED_RUN
 def test_the_ros_demo_runs_the_mission_on_real_nodes(ros_demo: tuple[int, str, Demo, float, list[Any]]) -> None:
     code, text, demo, wall, _ = ros_demo
     assert code == 0, text
@@ -138,7 +134,6 @@ def test_the_ros_demo_runs_the_mission_on_real_nodes(ros_demo: tuple[int, str, D
     assert wall < 40.0, f"took {wall:.1f} s"
 
 
-@SHARED_RUN
 def test_simulated_and_ros_demos_visit_the_same_pilot_modes(
         ros_demo: tuple[int, str, Demo, float, list[Any]]) -> None:
     _, text, ros, _, _ = ros_demo
@@ -206,7 +201,6 @@ def _stop(pid: int | None) -> None:
         os.kill(pid, signal.SIGKILL)
 
 
-@SHARED_RUN
 def test_the_ros_demo_serves_its_tree_to_the_tree_watcher(ros_demo: tuple[int, str, Demo, float, list[Any]]) -> None:
     code, text, _, _, snapshots = ros_demo
     assert code == 0, text

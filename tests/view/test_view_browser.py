@@ -1,25 +1,21 @@
-"""The web view as a person sees it: a real headless Chromium loads the page while the demo runs
-(and a recorded run replayed) at 1280x800, 1600x1000 and 1920x1080, and what a person must see
-without scrolling is checked from the boxes the page measured in the DOM it built (?check, see
-sm_bt/view/static/check.js): the running behaviours' names (>= 11 px, not cut), every cell of the
-mode table, the time axis and the events of the tick shown, inside the viewport and inside what
-clips them, and a document no wider or taller than the viewport. Chromium's 1280x800 window
-gives the page 1280x713 (its own bars take the rest, as on a laptop), which is checked; the
-screenshots, of the whole window, go to build/view/ (look at them).
+"""The web view as a person sees it: a real headless Chromium loads the page while the demo runs (the
+recorded demo replayed is tests/view/test_view_replay.py), and what a person must see without scrolling
+is checked from the boxes the page measured in the DOM it built (?check, see sm_bt/view/static/check.js
+and tests/support/page_checks.py): the running behaviours' names (>= 11 px, not cut), every cell of the
+mode table, the time axis and the events of the tick shown, inside the viewport and inside what clips
+them, and a document no wider or taller than the viewport. Chromium's 1280x800 window gives the page
+1280x713 (its own bars take the rest, as on a laptop), which is checked; the screenshots, of the whole
+window, go to build/view/ (look at them).
 
-docs/view.png is such a screenshot (the demo's laser failure being handled, 1280x800). It carries
-a fingerprint of the page's sources and of the demo tree's shape (a PNG text chunk):
-``SM_BT_WRITE_VIEW_PNG=1 pytest tests/view -k docs`` takes it again, and otherwise
-test_docs_view_png_is_current fails once the page or the tree changed since it was taken. So is
-docs/mission-failed.png: the run of a scenario whose expectation failed (`sm-bt test`), opened
-at the failing moment as `sm-bt view --at` opens it."""
+docs/mission-failed.png is such a screenshot: the run of a scenario whose expectation failed (`sm-bt
+test`), opened at the failing moment as `sm-bt view --at` opens it. It carries a fingerprint of the
+page's sources and of the scenario's files (a PNG text chunk): ``SM_BT_WRITE_VIEW_PNG=1 pytest tests/view
+-k failed_expectation`` takes it again, and otherwise the test fails once they changed since."""
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
-import json
 import os
 import re
 import shutil
@@ -30,117 +26,36 @@ import sys
 import threading
 import time
 import urllib.request
-import zlib
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
+from page_checks import (
+    SHOTS,
+    WRITE_DOCS_PNG,
+    assert_nothing_cut,
+    browse,
+    fingerprint,
+    inside,
+    layout_report,
+    text_of,
+    with_text,
+)
 from rich.console import Console
 from ros_processes import line_within
 
-from sm_bt.trees import pilot
 from sm_bt.trees.pilot.demo import Demo, Options
 from sm_bt.trees.pilot.platforms import SimulatedPlatform
 from sm_bt.view import View, attach_view, read_recording
 from sm_bt.view.assets import ASSETS, NEEDED, from_wheel, kept_wheel, missing
 from sm_bt.view.frames import Frame
-from sm_bt.view.server import STATIC, ViewServer
+from sm_bt.view.server import ViewServer
 
 pytestmark = pytest.mark.browser
 
 ROOT = Path(__file__).resolve().parents[2]
-SHOTS = ROOT / "build" / "view"
-SIZES = ((1280, 800), (1600, 1000), (1920, 1080))
-DOCS_PNG = ROOT / "docs" / "view.png"
 FAILED_PNG = ROOT / "docs" / "mission-failed.png"
 EXAMPLES = ROOT / "docs" / "examples"
-WRITE_DOCS_PNG = "SM_BT_WRITE_VIEW_PNG"
-#: The moment docs/view.png shows: recovery gave up on the laser, the pilot goes to degraded mode;
-#: the timeline zoomed into the first minute.
-DOCS_MOMENT = "at=17.6&span=0,60"
-#: Moments of the demo checked at every size: the laser failure being handled (many events, two
-#: running branches), and the robot going to recharge in energy saving mode (the deepest branch).
-MOMENTS = {"laser-failure": "at=17.6", "recharge": "at=60"}
-
-
-def _chromium() -> str:
-    found = shutil.which("chromium") or shutil.which("chromium-browser")
-    assert found, "no chromium on PATH: `make test` installs it (tools/ensure_chromium.sh)"
-    return found
-
-
-def _browse(url: str, *, size: tuple[int, int] = (1280, 800), screenshot: Path | None = None) -> str:
-    """The DOM the page built (and a screenshot of the window), once its work is done: Chromium's
-    virtual time runs the page until nothing is pending (a live page is loaded with ?once: the run
-    so far, then its stream closes)."""
-    command = [_chromium(), "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-               f"--window-size={size[0]},{size[1]}", "--virtual-time-budget=30000", "--dump-dom", url]
-    if screenshot is not None:
-        screenshot.parent.mkdir(parents=True, exist_ok=True)
-        screenshot.unlink(missing_ok=True)
-        command.insert(-2, f"--screenshot={screenshot}")
-    dom = subprocess.run(command, capture_output=True, text=True, timeout=120)
-    assert dom.returncode == 0, dom.stderr[-2000:]
-    if screenshot is not None:
-        assert screenshot.stat().st_size > 10_000, dom.stderr[-2000:]
-    return dom.stdout
-
-
-def _report(dom: str) -> dict[str, Any]:
-    found = re.search(r'<script id="layout-report" type="application/json">(.*?)</script>', dom, re.S)
-    assert found, "the page wrote no layout report (?check)"
-    report: dict[str, Any] = json.loads(found.group(1))
-    return report
-
-
-def _inside(box: list[int], outer: list[int]) -> bool:
-    return box[0] >= outer[0] and box[1] >= outer[1] and box[2] <= outer[2] and box[3] <= outer[3]
-
-
-def _assert_nothing_cut(report: dict[str, Any], where: str, running: bool = True) -> None:
-    """What a person must see is in view: see the module's docstring."""
-    width, height = report["viewport"]
-    view = [0, 0, width, height]
-    assert report["document"][0] <= width, f"{where}: the page is wider than the window: {report['document']}"
-    assert report["document"][1] <= height, f"{where}: the page is taller than the window: {report['document']}"
-    if running:
-        assert report["running"], f"{where}: no running behaviour drawn"
-    for item in report["running"]:
-        assert _inside(item["box"], view) and _inside(item["box"], item["clip"]), f"{where}: {item} out of view"
-        assert item["font"] >= 11 and not item["elided"], f"{where}: {item} not readable"
-    assert len(report["cells"]) >= 4 * 6, f"{where}: the mode table has no rows"
-    for item in report["cells"]:
-        assert _inside(item["box"], view) and _inside(item["box"], item["clip"]), f"{where}: {item} cut"
-        assert not item["elided"], f"{where}: {item} cut"
-    ticks = report["axis"]
-    assert len(ticks) >= 3 and all(tick["name"].endswith(" s") for tick in ticks), f"{where}: no time axis: {ticks}"
-    for item in ticks:
-        assert _inside(item["box"], view) and _inside(item["box"], item["clip"]), f"{where}: {item} cut"
-    assert report["current"], f"{where}: no events up to the tick shown"
-    for item in report["current"]:
-        assert _inside(item["box"], view) and _inside(item["box"], item["clip"]), f"{where}: {item} not in view"
-
-
-#: The tests that read the recorded demo run in one pytest-xdist worker (``--dist loadgroup``): the
-#: recording is made once, not once per worker (15-20 s each on a loaded machine).
-RECORDED = pytest.mark.xdist_group("view_recording")
-
-
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> list[Frame]:
-    """The whole demo (two rounds, the laser failure) recorded at full speed."""
-    path = tmp_path_factory.mktemp("view") / "demo.jsonl"
-    demo = Demo(Options(speed=0.0, quiet=True, record=str(path)), Console(file=io.StringIO(), width=120))
-    assert demo.run() == 0
-    return read_recording(path)
-
-
-@pytest.fixture(scope="module")
-def replay(recording: list[Frame]) -> Iterator[ViewServer]:
-    server = ViewServer(port=0, frames=recording)
-    yield server
-    server.close()
 
 
 @pytest.fixture
@@ -167,30 +82,15 @@ def test_the_page_shows_the_running_tree_the_modes_and_the_events_during_the_dem
                   for frame in view.server.history() for event in frame.get("events", ())):
         assert time.monotonic() < deadline, "no fault divergence in the demo's frames"
         time.sleep(0.2)
-    dom = _browse(view.url + "?once&check", screenshot=SHOTS / "live-1280x800.png")
-    report = _report(dom)
-    _assert_nothing_cut(report, "live")
+    dom = browse(view.url + "?once&check", screenshot=SHOTS / "live-1280x800.png")
+    report = layout_report(dom)
+    assert_nothing_cut(report, "live")
     running = {item["name"] for item in report["running"]}
     assert {"Pilot", "Patrol with contingencies", "Patrol"} <= running, running
     assert '<tr data-part="pilot" class="system' in dom
     assert "active.<wbr>f_<wbr>" in dom.split('data-part="pilot"', 1)[1].split("</tr>", 1)[0]  # wraps there if it must
     assert '<li class="divergence' in dom and "(fault" in dom
     assert 'data-once="true"' in dom
-
-
-@RECORDED
-@pytest.mark.parametrize("size", SIZES, ids=[f"{w}x{h}" for w, h in SIZES])
-def test_nothing_is_cut_on_a_screen_of(size: tuple[int, int], replay: ViewServer) -> None:
-    for moment, query in MOMENTS.items():
-        shot = SHOTS / f"{moment}-{size[0]}x{size[1]}.png"
-        report = _report(_browse(f"{replay.url}?check&{query}", size=size, screenshot=shot))
-        _assert_nothing_cut(report, f"{moment} at {size}")
-        names = {item["name"] for item in report["running"]}
-        if moment == "laser-failure":  # both running branches: the contingency and the patrol
-            assert {"f_degraded_mode on divergence", "Patrol round"} <= names, names
-            assert any("gave up" in item["name"] for item in report["current"]), report["current"]
-        else:
-            assert "To recharge station" in names, names
 
 
 def test_long_part_and_mode_names_wrap_instead_of_being_cut() -> None:
@@ -209,95 +109,10 @@ def test_long_part_and_mode_names_wrap_instead_of_being_cut() -> None:
                                         "request": 1, "done": False, "ok": None}]}]
     server = ViewServer(port=0, frames=frames)
     try:
-        report = _report(_browse(server.url + "?check", screenshot=SHOTS / "long-names-1280x800.png"))
+        report = layout_report(browse(server.url + "?check", screenshot=SHOTS / "long-names-1280x800.png"))
     finally:
         server.close()
-    _assert_nothing_cut(report, "long names")
-
-
-@RECORDED
-def test_a_requests_plan_is_shown_with_it_in_the_list_and_on_its_band(replay: ViewServer) -> None:
-    dom = _browse(f"{replay.url}?at=17.6")
-    item = re.search(r'<li class="request[^"]*"[^>]*title="(change_mode pilot f_degraded_mode: [^"]*)"[^>]*>'
-                     r'([^<]*)</li>', dom)
-    assert item, "the degraded-mode request's plan is on its list item"
-    assert "(3 calls)" in item.group(2) and "amcl: active.__DEFAULT__ -&gt; active.DEGRADED" in item.group(1)
-    # Request numbers count in the whole test process: any number.
-    assert re.search(r"<title>#\d+ change_mode pilot f_degraded_mode started \[tree\]\n"
-                     r"change_mode pilot f_degraded_mode: 3 calls", dom), "and on its band's tooltip"
-
-
-@RECORDED
-def test_the_page_follows_the_scrubber_to_the_end_of_a_replay(replay: ViewServer, recording: list[Frame]) -> None:
-    dom = _browse(replay.url + "?check", screenshot=SHOTS / "replay-end-1280x800.png")
-    assert 'data-ended="true"' in dom, "the replay's end reached the page"
-    assert re.search(r'<span id="ended" class="status" title="[^"]*">run over</span>', dom), "said, and shown"
-    assert f'max="{len(recording) - 1}"' in dom, "the scrubber spans every recorded frame"
-    report = _report(dom)
-    _assert_nothing_cut(report, "the end of the run", running=False)
-    last = [event["text"] for frame in recording for event in frame.get("events", ())][-1]
-    assert last[:40] in report["current"][-1]["name"], (last, report["current"])  # the list followed
-
-
-@RECORDED
-def test_a_page_load_of_the_demo_weighs_under_3_mb(recording: list[Frame]) -> None:
-    """Everything, the py_trees_js assets included (a browser caches those): format 1 sent 29 MB."""
-    server = ViewServer(port=0, frames=recording)
-    try:
-        _browse(server.url)
-        sent = dict(server.sent)
-    finally:
-        server.close()
-    assets = sum(size for path, size in sent.items() if path.startswith("/assets/"))
-    assert sent["/events"] <= 1_000_000 and sum(sent.values()) <= 3_000_000, sent
-    assert assets > 1_000_000, "the assets were loaded too"
-
-
-def _fingerprint(*files: Path) -> str:
-    """The page's sources and the demo tree's shape: what docs/view.png shows (and ``files``)."""
-    digest = hashlib.sha256()
-    for path in sorted(STATIC.glob("*.*")):
-        digest.update(path.name.encode() + path.read_bytes())
-    root = pilot.create_root(2)
-    digest.update(repr([(b.name, len(b.children)) for b in root.iterate()]).encode())
-    for path in files:
-        digest.update(path.name.encode() + path.read_bytes())
-    return digest.hexdigest()[:16]
-
-
-_KEY = b"sm-bt-view"
-
-
-def _with_text(png: bytes, text: str) -> bytes:
-    """``png`` with a tEXt chunk (``sm-bt-view``: ``text``) before its end."""
-    data = _KEY + b"\0" + text.encode()
-    chunk = struct.pack(">I", len(data)) + b"tEXt" + data + struct.pack(">I", zlib.crc32(b"tEXt" + data))
-    end = png.rindex(b"IEND") - 4
-    return png[:end] + chunk + png[end:]
-
-
-def _text_of(png: bytes) -> str | None:
-    at = 8
-    while at < len(png):
-        (length,) = struct.unpack(">I", png[at:at + 4])
-        kind, data = png[at + 4:at + 8], png[at + 8:at + 8 + length]
-        if kind == b"tEXt" and data.startswith(_KEY + b"\0"):
-            return data[len(_KEY) + 1:].decode()
-        at += 12 + length
-    return None
-
-
-@RECORDED
-def test_docs_view_png_is_current(replay: ViewServer) -> None:
-    if os.environ.get(WRITE_DOCS_PNG):
-        shot = SHOTS / "docs-1280x800.png"
-        _assert_nothing_cut(_report(_browse(f"{replay.url}?check&{DOCS_MOMENT}", screenshot=shot)), "docs")
-        DOCS_PNG.write_bytes(_with_text(shot.read_bytes(), _fingerprint()))
-    png = DOCS_PNG.read_bytes()
-    assert png[16:24] == struct.pack(">II", 1280, 800), "docs/view.png is a 1280x800 screenshot"
-    assert _text_of(png) == _fingerprint(), (
-        f"docs/view.png shows an older page or tree: take it again with {WRITE_DOCS_PNG}=1 "
-        "pytest tests/view -k docs_view_png (and look at it)")
+    assert_nothing_cut(report, "long names")
 
 
 def test_a_failed_expectation_is_listed_and_marked_at_its_moment(tmp_path: Path,
@@ -319,21 +134,21 @@ def test_a_failed_expectation_is_listed_and_marked_at_its_moment(tmp_path: Path,
     server = ViewServer(port=0, frames=read_recording(found[1]))
     try:
         shot = SHOTS / "mission-failed-1280x800.png"
-        dom = _browse(f"{server.url}?check&at={found[2]}", screenshot=shot)
+        dom = browse(f"{server.url}?check&at={found[2]}", screenshot=shot)
     finally:
         server.close()
-    report = _report(dom)
-    _assert_nothing_cut(report, "a failed expectation")
+    report = layout_report(dom)
+    assert_nothing_cut(report, "a failed expectation")
     assert report["current"][-1]["name"].startswith("3.50 s  nav_scenario.yaml:12: at 3.5 s"), report["current"]
     assert '<li class="expectation now" data-index=' in dom, "listed as the newest event of the moment shown"
     assert '<line x1=' in dom and 'class="expectation"' in dom, "the timeline marks the failure"
-    fingerprint = _fingerprint(*(EXAMPLES / name for name in ("nav_mission.xml", "nav_stubs.yaml",
+    files = fingerprint(*(EXAMPLES / name for name in ("nav_mission.xml", "nav_stubs.yaml",
                                                               "nav_scenario.yaml")))
     if os.environ.get(WRITE_DOCS_PNG):
-        FAILED_PNG.write_bytes(_with_text(shot.read_bytes(), fingerprint))
+        FAILED_PNG.write_bytes(with_text(shot.read_bytes(), files))
     png = FAILED_PNG.read_bytes()
     assert png[16:24] == struct.pack(">II", 1280, 800), "docs/mission-failed.png is a 1280x800 screenshot"
-    assert _text_of(png) == fingerprint, (
+    assert text_of(png) == files, (
         f"docs/mission-failed.png shows an older page or scenario: take it again with {WRITE_DOCS_PNG}=1 "
         "pytest tests/view -k failed_expectation (and look at it)")
 
@@ -362,9 +177,9 @@ def test_a_quiet_demo_with_a_view_says_where_and_that_it_stays() -> None:
             lines.append(line_within(demo.stdout, 60.0, "sm-bt demo --view: the run's end"))
         assert lines[-1].strip() == f"run over; the view stays at {url} until Ctrl-C", lines
         assert any(line.startswith("Summary") for line in lines)
-        dom = _browse(url + "?check")  # no ?once: the page learns that the run is over from the server
+        dom = browse(url + "?check")  # no ?once: the page learns that the run is over from the server
         assert 'data-ended="true"' in dom and re.search(r'<span id="ended" class="status" title="[^"]*">', dom)
-        assert _report(dom)["frames"] > 100
+        assert layout_report(dom)["frames"] > 100
         demo.send_signal(signal.SIGINT)
         _, err = demo.communicate(timeout=30)
     finally:
@@ -392,11 +207,11 @@ def test_who_holds_a_part_is_a_column_of_the_modes_table_while_one_does(tmp_path
     assert demo.run() == 0
     server = ViewServer(port=0, frames=read_recording(recording))
     try:
-        held = _browse(f"{server.url}?check&at=60", screenshot=SHOTS / "held-1280x800.png")
-        before = _browse(f"{server.url}?check&at=10")
+        held = browse(f"{server.url}?check&at=60", screenshot=SHOTS / "held-1280x800.png")
+        before = browse(f"{server.url}?check&at=10")
     finally:
         server.close()
-    _assert_nothing_cut(_report(held), "the held-by column")
+    assert_nothing_cut(layout_report(held), "the held-by column")
     assert '<table id="modes" class="holding">' in held
     assert held.count('<td class="held">rule degrade_from_normal (priority 100)</td>') == 5  # pilot and its 4 nodes
     assert '<table id="modes" class="">' in before or '<table id="modes">' in before
@@ -455,10 +270,10 @@ def test_a_model_of_thousands_of_parts_shows_what_matters_and_how_many_there_are
                for frame in frames for event in frame.get("events", ()))
     server = ViewServer(port=0, frames=frames)
     try:
-        dom = _browse(f"{server.url}?check", screenshot=SHOTS / "large-model-1280x800.png")
+        dom = browse(f"{server.url}?check", screenshot=SHOTS / "large-model-1280x800.png")
     finally:
         server.close()
-    _assert_nothing_cut(_report(dom), "2,000 nodes")
+    assert_nothing_cut(layout_report(dom), "2,000 nodes")
     summary = re.search(r'<p id="modes-summary">([^<]*)</p>', dom)
     assert summary and summary.group(1) == "2,223 parts (223 systems, 2,000 nodes): 69 diverge; 8 shown", summary
     rows = re.findall(r'<tr data-part="([^"]+)"', dom)
@@ -476,15 +291,15 @@ def test_the_fleet_demos_view_shows_the_fleet_tree_and_a_band_per_robot_while_on
     assert demo.run() == 0
     server = ViewServer(port=0, frames=read_recording(recording))
     try:
-        dom = _browse(f"{server.url}?check&at=5.5", screenshot=SHOTS / "fleet-1280x800.png")
+        dom = browse(f"{server.url}?check&at=5.5", screenshot=SHOTS / "fleet-1280x800.png")
     finally:
         server.close()
-    report = _report(dom)
+    report = layout_report(dom)
     width, height = report["viewport"]
     assert report["document"][0] <= width and report["document"][1] <= height, report["document"]
     assert [item["name"] for item in report["running"]] == ["fleet shift", "until the night"], report["running"]
     for item in report["running"] + report["cells"] + report["axis"]:
-        assert _inside(item["box"], [0, 0, width, height]) and _inside(item["box"], item["clip"]), item
+        assert inside(item["box"], [0, 0, width, height]) and inside(item["box"], item["clip"]), item
         assert not item.get("elided"), item
     rows = re.findall(r'<tr data-part="(\w+)"[^>]*><td>\w+</td><td>[^<]*(?:<wbr>[^<]*)*</td><td>([^<]*)', dom)
     assert [part for part, _ in rows] == ["fleet", "robot1", "robot2"], rows
