@@ -151,7 +151,11 @@ def test_simulated_and_ros_demos_visit_the_same_pilot_modes(
     assert ros.final_mode == str(sim.manager.actual("pilot")) == "active.f_normal_mode"
     assert (ros.tally.waypoints, ros.tally.recharges, ros.tally.gave_up) == \
         (sim.tally.waypoints, sim.tally.recharges, sim.tally.gave_up)
-    assert ros.world.odometer == pytest.approx(sim.world.odometer, abs=0.5)
+    # The route is the same; only the recharge detour leaves from where the tick that saw the battery
+    # low had put the robot. On ROS a tick drives for the real time since the last one, times 40: up to
+    # 0.5 m/s x 2 s of world time when a tick is 50 ms late on a loaded machine (0.53 m more, once). The
+    # detour then differs by at most twice that shift of its start.
+    assert ros.world.odometer == pytest.approx(sim.world.odometer, abs=2.0)
 
 
 def test_ctrl_c_stops_the_ros_demo_and_its_node_process() -> None:
