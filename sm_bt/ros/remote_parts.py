@@ -123,7 +123,8 @@ class RemoteBackend:
                 node.create_client(GetMode, f"{fqn}/get_mode"), reference,
                 None if reference else node.create_client(RequestChange, f"{fqn}/request_change"),
                 None if reference else node.create_client(PreviewChange, f"{fqn}/preview_change"),
-                None if reference else RobotRequests(part.name, self._clock, outcome_timeout))
+                None if reference else RobotRequests(part.name, self._clock, outcome_timeout,
+                                                     settle=functools.partial(self._settle, part.name)))
         self._liveliness: Liveliness | None = None
 
     @property
@@ -252,8 +253,17 @@ class RemoteBackend:
                 self._accepted(robot, asked)
             requests.accepted(int(response.request), label, done)
 
+        def told(result: CallResult) -> None:  # its outcome came, its answer did not
+            if asked is not None and result.ok:
+                self._accepted(robot, asked)
+            done(result)
+
+        asks = ("change_mode", request.mode) if request.mode else ("change_state", request.transition)
         self._calls.change(robot, robot.request_change, request, label, answered,
-                           lambda why: done(CallResult(False, why)))
+                           lambda why: done(CallResult(False, why)), told=told, told_by=asks)
+
+    def _settle(self, part: str, told_by: tuple[str, str], result: CallResult) -> bool:
+        return self._calls.settle(self._robots[part], told_by, result)
 
     def _accepted(self, robot: Robot, mode: str) -> None:
         """A mode accepted: until its manager reports it, each probe (at the fast pace) reads it too,

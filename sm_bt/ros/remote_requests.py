@@ -8,7 +8,10 @@ with the robot's reason, rather than at the fleet's timeout, as the simulated fl
 (:class:`sm_bt.sim.remotes.RemoteManagers`) does.
 
 An outcome may come before the answer that names its number (the topic and the service are two
-channels): the fleet's own outcomes are kept until then. A robot that goes out of reach fails the
+channels): the fleet's own outcomes are kept until then. An answer may also never come: a server
+that has not yet discovered a new client's reply reader drops its reply (seen under load, the
+fleet's first change of a robot just started). So an outcome still unclaimed :data:`ANSWER_GRACE` s
+later ends the one unanswered call that asked what it says (``settle``). A robot that goes out of reach fails the
 requests it owes (its numbers start again if its manager restarts), and an outcome that never comes
 fails its request after ``timeout`` seconds (the robot's requests all end within its own request
 timeout: only a lost message gets there).
@@ -18,6 +21,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,6 +31,9 @@ from sm_bt.model.types import FLEET_REQUESTER
 
 #: Outcomes of the fleet's requests kept while their answers are on the way (a few at most).
 EARLY_OUTCOMES = 16
+#: An outcome whose answer has not come this long after it ends the call without it: answers come
+#: within milliseconds of their outcome, before or after.
+ANSWER_GRACE = 0.5
 
 
 @dataclass
@@ -37,26 +44,30 @@ class _Pending:
 
 
 class RobotRequests:
-    """The fleet's requests that ``part``'s manager accepted and has not ended yet."""
+    """The fleet's requests that ``part``'s manager accepted and has not ended yet. ``settle(told_by,
+    result)``: end the unanswered call that asked ``told_by`` (``("change_mode", mode)``) with
+    ``result``; True if there was one."""
 
-    def __init__(self, part: str, clock: Clock, timeout: float) -> None:
+    def __init__(self, part: str, clock: Clock, timeout: float, *,
+                 settle: Callable[[tuple[str, str], CallResult], bool] = lambda told_by, result: False) -> None:
         self.part = part
         self._clock = clock
         self.timeout = timeout
+        self._settle = settle
         self._lock = threading.Lock()
         self._pending: dict[int, _Pending] = {}
-        self._early: OrderedDict[int, CallResult] = OrderedDict()
+        self._early: OrderedDict[int, tuple[CallResult, tuple[str, str]]] = OrderedDict()
 
     def accepted(self, number: int, label: str, done: Done) -> None:
         """Its manager accepted ``label`` as request ``number``: ``done`` when it ends."""
         with self._lock:
-            result = self._early.pop(number, None)
-            if result is None:
+            early = self._early.pop(number, None)
+            if early is None:
                 pending = _Pending(label, done)
                 self._pending[number] = pending
                 pending.timer = self._clock.call_later(self.timeout, lambda: self._expired(number, pending))
-        if result is not None:
-            done(result)
+        if early is not None:
+            done(early[0])
 
     def ended(self, message: Any) -> None:
         """A ``RequestOutcome`` of its manager (anybody's: only the fleet's own count)."""
@@ -66,14 +77,26 @@ class RobotRequests:
         outcome = str(message.outcome)
         result = CallResult(True) if outcome == "succeeded" else CallResult(
             False, f"its manager's request #{number} {outcome}: {message.reason}")
+        words = str(message.description).split()
+        told_by = (words[0], words[2]) if len(words) >= 3 else ("", "")
         with self._lock:
             pending = self._pending.pop(number, None)
             if pending is None:
-                self._early[number] = result
+                self._early[number] = (result, told_by)
                 while len(self._early) > EARLY_OUTCOMES:
                     self._early.popitem(last=False)
-                return
+        if pending is None:
+            self._clock.call_later(ANSWER_GRACE, lambda: self._unclaimed(number))
+            return
         self._finish(pending, result)
+
+    def _unclaimed(self, number: int) -> None:
+        """Outcome ``number`` is still without its answer: it ends the call that asked it, if one does."""
+        with self._lock:
+            early = self._early.get(number)
+        if early is not None and self._settle(early[1], early[0]):
+            with self._lock:
+                self._early.pop(number, None)
 
     def lost(self, why: str) -> None:
         """Its manager is out of reach: what it owes fails (a new process numbers its requests anew)."""

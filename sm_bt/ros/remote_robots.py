@@ -29,6 +29,17 @@ REFERENCE_EVENTS = 2.2
 REFERENCE_ECHO = 0.2
 
 
+@dataclass(frozen=True)
+class Owed:
+    """A change call its manager has not answered: ``fail(why)`` ends it failed. A request of an sm-bt
+    robot may also end from the robot's own word, ``told(result)`` (False if the call had ended), once
+    ``told_by`` (what the robot's request says it asked: ``("change_mode", mode)``) matches."""
+
+    fail: Callable[[str], None]
+    told: Callable[[Any], bool] | None = None
+    told_by: tuple[str, str] = ("", "")
+
+
 @dataclass
 class Robot:
     """A remote part, its manager's clients, and what the fleet knows of it (guarded by the
@@ -63,7 +74,7 @@ class Robot:
     events: int = 0  # events received: an answer to a call sent before the last one is older news
     asked: str | None = None  # a mode its manager accepted and has not reported yet: read at each probe
     mode_told: bool = False  # its manager's mode event came since the robot was last told in another state
-    owed: dict[int, Callable[[str], None]] = field(default_factory=dict)  # change calls unanswered: each fails
+    owed: dict[int, Owed] = field(default_factory=dict)  # change calls unanswered
     #: Its manager's services the graph showed this client since it was last in reach (see RobotCalls.change).
     seen_ready: set[Any] = field(default_factory=set)
 
@@ -85,7 +96,8 @@ class RobotCalls:
             robot.requests_from = min(robot.requests_from, robot.last_heard + REFERENCE_ECHO)
 
     def change(self, robot: Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
-               failed: Callable[[str], None]) -> None:
+               failed: Callable[[str], None], *, told: Callable[[Any], None] | None = None,
+               told_by: tuple[str, str] = ("", "")) -> None:
         """A change request (see :meth:`call`), owed until answered (:meth:`abandon`); to the
         reference, paced (see the module). To a manager whose process DDS vouches for, it is sent
         without asking the graph whether the service is there, once the graph has shown it since the
@@ -97,7 +109,8 @@ class RobotCalls:
             wait = robot.requests_from - self._clock.now() if robot.reference else 0.0
             vouched = robot.present and robot.lively
         if wait > 0:
-            self._clock.call_later(wait, lambda: self.change(robot, client, request, label, answered, failed))
+            self._clock.call_later(wait, lambda: self.change(robot, client, request, label, answered, failed,
+                                                             told=told, told_by=told_by))
             return
 
         def accepted(response: Any) -> None:
@@ -106,7 +119,8 @@ class RobotCalls:
                     robot.reads_from = robot.requests_from = self._clock.now() + REFERENCE_EVENTS
             answered(response)
 
-        self.call(robot, client, request, label, accepted, failed, checked=not vouched, owed=True)
+        self.call(robot, client, request, label, accepted, failed, checked=not vouched, owed=True, told=told,
+                  told_by=told_by)
 
     def abandon(self, robot: Robot, why: str) -> None:
         """Its manager is out of reach: the change requests it has not answered fail with ``why``, and
@@ -114,16 +128,27 @@ class RobotCalls:
         with self._lock:
             owed, robot.owed = list(robot.owed.values()), {}
             robot.seen_ready.clear()
-        for fail in owed:
-            fail(why)
+        for call in owed:
+            call.fail(why)
+
+    def settle(self, robot: Robot, told_by: tuple[str, str], result: Any) -> bool:
+        """Its manager told how a request of the fleet's ended (``told_by``: what it asked) while the
+        call that made it is still unanswered: the answer was lost (a server that has not discovered a
+        new client's reply reader drops the reply) or is late. The one such call ends with ``result``
+        and its answer, if it comes, is ignored. False, and nothing done, unless exactly one owed call
+        asked that."""
+        with self._lock:
+            calls = [call for call in robot.owed.values() if call.told is not None and call.told_by == told_by]
+        return len(calls) == 1 and calls[0].told is not None and calls[0].told(result)
 
     def call(self, robot: Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
              failed: Callable[[str], None], timeout: float | None = None, *, checked: bool = True,
-             owed: bool = False) -> None:
+             owed: bool = False, told: Callable[[Any], None] | None = None,
+             told_by: tuple[str, str] = ("", "")) -> None:
         """``request`` on ``client``: ``answered(response)``, or ``failed(why)`` once ``timeout`` passed
         (the call timeout unless given); ``checked`` (or never seen since it was in reach): at once if
-        the graph shows no such service. ``owed``: :meth:`abandon` fails it too. Any answer is word from
-        its manager."""
+        the graph shows no such service. ``owed``: :meth:`abandon` fails it too, and ``told(result)``
+        ends it instead of its answer when :meth:`settle` says so. Any answer is word from its manager."""
         with self._lock:
             checked = checked or client not in robot.seen_ready
         if checked:
@@ -156,10 +181,18 @@ class RobotCalls:
                 client.remove_pending_request(future)
                 failed(why)
 
+        def settled(result: Any) -> bool:
+            if not first():
+                return False
+            client.remove_pending_request(future)
+            assert told is not None
+            told(result)
+            return True
+
         limit = timeout if timeout is not None else self.call_timeout
         if owed:  # before it can end: its callbacks are not attached yet
             with self._lock:
-                robot.owed[key] = given_up
+                robot.owed[key] = Owed(given_up, settled if told is not None else None, told_by)
         future.add_done_callback(on_done)
         self._clock.call_later(limit, lambda: given_up(f"the manager of {robot.part} did not answer {label} "
                                                         f"within {limit:g} s"))

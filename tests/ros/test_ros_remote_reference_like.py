@@ -85,6 +85,10 @@ class ScriptedManager:
         # it does not move), None: never told; first: told before its answer. refusal: refused so.
         self.outcome: str | None = "succeeded"
         self.outcome_first = False
+        # Its answers to request_change held back (a reply lost or late) until `released` is set; on a
+        # node and executor of their own, threads enough for several, so that the rest goes on meanwhile.
+        self.hold_answers = False
+        self.released = threading.Event()
         self.refusal = ""
         # Its preview of a change while it knows no state: its nodes out of its reach (refused), not seen
         # yet (waits), or between modes (possible).
@@ -106,7 +110,17 @@ class ScriptedManager:
             node.create_service(ChangeMode, f"{prefix}/change_mode", self._change_mode)]
         if outcomes:
             self._outcomes = node.create_publisher(RequestOutcome, f"{prefix}/request_outcome", OUTCOMES)
-            self._services.append(node.create_service(RequestChange, f"{prefix}/request_change", self._request_change))
+            import rclpy
+            from rclpy.callback_groups import ReentrantCallbackGroup
+            from rclpy.executors import MultiThreadedExecutor
+
+            self._answers = rclpy.create_node("scripted_answers", context=ros.context)
+            self._services.append(self._answers.create_service(RequestChange, f"{prefix}/request_change",
+                                                               self._answer_change,
+                                                               callback_group=ReentrantCallbackGroup()))
+            self._answering = MultiThreadedExecutor(num_threads=4, context=ros.context)
+            self._answering.add_node(self._answers)
+            threading.Thread(target=self._spin_answers, daemon=True).start()
             self._services.append(node.create_service(PreviewChange, f"{prefix}/preview_change", self._preview_change))
 
     def move(self, state: State, mode: str) -> None:
@@ -194,6 +208,25 @@ class ScriptedManager:
         return response
 
 
+    def close(self) -> None:
+        """Stop answering request_change (a held answer is let go)."""
+        self.released.set()
+        self._answering.shutdown(5.0)
+        self._answers.destroy_node()
+
+    def _spin_answers(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        with contextlib.suppress(ExternalShutdownException):
+            self._answering.spin()
+
+    def _answer_change(self, request: RequestChange.Request,
+                       response: RequestChange.Response) -> RequestChange.Response:
+        answer = self._request_change(request, response)
+        if self.hold_answers:
+            self.released.wait(30.0)
+        return answer
+
     def _request_change(self, request: RequestChange.Request,
                         response: RequestChange.Response) -> RequestChange.Response:
         what = request.mode or request.transition
@@ -236,10 +269,12 @@ def scripted(ros_context: RosContext) -> ScriptedManager:
 
 
 @pytest.fixture
-def scripted_sm_bt(ros_context: RosContext) -> ScriptedManager:
+def scripted_sm_bt(ros_context: RosContext) -> Iterator[ScriptedManager]:
     """It plays sm-bt manager: its mode_event offers sm-bt manager's lease, it takes request_change and
     tells request_outcome."""
-    return ScriptedManager(ros_context, lease=True, outcomes=True)
+    scripted = ScriptedManager(ros_context, lease=True, outcomes=True)
+    yield scripted
+    scripted.close()
 
 
 def _leases_asked(ros: RosContext, topic: str) -> list[float]:
@@ -472,6 +507,31 @@ def test_served_by_sm_bt_a_change_is_done_when_the_robots_request_ends_told_befo
         _done(runtime, "__DEFAULT__")
         assert scripted.requests == ["request_change f_performance_mode [fleet]",
                                      "request_change f_normal_mode [fleet]"]
+
+
+def test_served_by_sm_bt_a_request_whose_answer_is_lost_ends_with_the_outcome_the_robot_told(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    """A server that has not discovered a new client's reply reader drops its reply: the robot's
+    request ends and says so on request_outcome, and the fleet's ends with it, not at its timeout."""
+    scripted = scripted_sm_bt
+    with _reading(scripted, tmp_path) as runtime:  # its request timeout: 10 s
+        scripted.outcome_first, scripted.hold_answers = True, True
+        request = runtime.manager.change_mode("fleet", "FAST")
+        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+        assert request.succeeded and took < 3.0, (took, request.reason)
+        assert str(runtime.manager.actual("robot1")) == "active.f_performance_mode"
+        scripted.outcome = "failed"
+        request = _fails(runtime, "__DEFAULT__", within=3.0)
+        assert request.reason == ("robot1: change_mode f_normal_mode failed: its manager's request #2 failed: "
+                                  "amcl: activate failed"), request.reason
+        # The answers come at last: taken for what they are, late (nothing ends twice), and the next
+        # request, answered, is done as ever.
+        scripted.hold_answers = False
+        scripted.released.set()
+        scripted.outcome = "succeeded"
+        _done(runtime, "__DEFAULT__")
+        assert scripted.requests == ["request_change f_performance_mode [fleet]",
+                                     "request_change f_normal_mode [fleet]", "request_change f_normal_mode [fleet]"]
 
 
 def test_served_by_sm_bt_a_robots_failed_or_refused_request_fails_the_fleets_at_once_with_its_reason(
