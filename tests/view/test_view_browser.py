@@ -31,6 +31,7 @@ from pathlib import Path
 
 import pytest
 from page_checks import (
+    ROOT,
     SHOTS,
     WRITE_DOCS_PNG,
     assert_nothing_cut,
@@ -53,7 +54,6 @@ from sm_bt.view.server import ViewServer
 
 pytestmark = pytest.mark.browser
 
-ROOT = Path(__file__).resolve().parents[2]
 FAILED_PNG = ROOT / "docs" / "mission-failed.png"
 EXAMPLES = ROOT / "docs" / "examples"
 

@@ -16,10 +16,10 @@ import os
 import re
 import struct
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 from page_checks import (
+    ROOT,
     SHOTS,
     WRITE_DOCS_PNG,
     assert_nothing_cut,
@@ -38,7 +38,6 @@ from sm_bt.view.server import ViewServer
 
 pytestmark = pytest.mark.browser
 
-ROOT = Path(__file__).resolve().parents[2]
 SIZES = ((1280, 800), (1600, 1000), (1920, 1080))
 DOCS_PNG = ROOT / "docs" / "view.png"
 #: the timeline zoomed into the first minute.
