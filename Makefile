@@ -19,9 +19,7 @@ export ROS_LOG_DIR := $(CURDIR)/build/ros_log
 $(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh sm_bt/view/assets.py
 	@echo "sm_bt: creating $(VENV) and installing the pinned dependencies (ROS 2 Jazzy wheels included; about a minute the first time) ..."
 	$(PYTHON) -m venv $(VENV)
-	@# --no-compile: byte-compiling every installed module took a third of the install (18 of 58 s);
-	@# Python compiles what is imported, once, at its first import.
-	$(BIN)/python -m pip install --quiet --no-compile --disable-pip-version-check -c constraints.txt -e '.[test,ros,docs]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,ros,docs]'
 	@echo "sm_bt: dependencies installed; now the interface packages (built once, then cached)"
 	bash tools/ensure_interfaces.sh $(VENV)
 	$(BIN)/python -m sm_bt.view.assets
