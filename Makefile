@@ -23,6 +23,9 @@ $(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfac
 	@echo "sm_bt: dependencies installed; now the interface packages (built once, then cached)"
 	bash tools/ensure_interfaces.sh $(VENV)
 	$(BIN)/python -m sm_bt.view.assets
+	@# The project's own modules, byte-compiled once: with PYTHONDONTWRITEBYTECODE=1 (as on CI machines)
+	@# every process would compile them again (a stale .pyc is never used: Python checks the source).
+	$(BIN)/python -m compileall -q sm_bt behaviours trees bench tests/support
 	touch $@
 
 demo: $(STAMP)
