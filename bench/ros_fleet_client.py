@@ -89,16 +89,15 @@ class RobotsClient(SpunClient):
 
     def call(self, client: Any, request: Any, timeout: float = CALL_TIMEOUT) -> Any:
         """The response of ``client`` to ``request``; ``RuntimeError`` after ``timeout`` s."""
-        done = threading.Event()
-        future = client.call_async(request)
-        future.add_done_callback(lambda _future: done.set())
-        if not done.wait(timeout):
-            client.remove_pending_request(future)
+        from sm_bt.ros.node_calls import answer
+
+        try:
+            response = answer(client, request, timeout)
+        except Exception as error:
+            raise RuntimeError(f"{client.srv_name}: {error!r}") from error
+        if response is None:
             raise RuntimeError(f"{client.srv_name}: no answer within {timeout:g} s")
-        error = future.exception()
-        if error is not None:
-            raise RuntimeError(f"{client.srv_name}: {error!r}")
-        return future.result()
+        return response
 
     def switch(self, fleet_mode: str, *, answers: bool = True) -> float:
         """Every robot's ``change_mode`` at once; seconds until every ``mode_event`` says the mode

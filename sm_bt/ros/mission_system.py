@@ -223,6 +223,7 @@ class _ParameterClient:
         when it does not answer within :data:`SET_TIMEOUT`."""
         from rcl_interfaces.srv import SetParameters
 
+        from sm_bt.ros.node_calls import answer
         from sm_bt.ros.parameters import to_parameters
 
         name = f"/{node}/set_parameters"
@@ -232,15 +233,12 @@ class _ParameterClient:
         # Asking twice changes nothing: a first request whose answer was lost (the path back to a
         # new client is matched late) is asked again.
         for _ in range(2):
-            done = threading.Event()
-            future = client.call_async(request)
-            future.add_done_callback(lambda _, answered=done: answered.set())
-            if done.wait(SET_TIMEOUT / 2):
-                refused = [result.reason for result in future.result().results if not result.successful]
+            response = answer(client, request, SET_TIMEOUT / 2)
+            if response is not None:
+                refused = [result.reason for result in response.results if not result.successful]
                 if refused:
                     raise ValueError(f"{node} refused {', '.join(values)}: {refused[0]}")
                 return
-            client.remove_pending_request(future)
         raise ValueError(f"{node} did not answer a parameter set within {SET_TIMEOUT:g} s")
 
     def close(self) -> None:

@@ -24,6 +24,19 @@ from sm_bt.ros.peers import SLACK, NodeCall, Peer
 log = logging.getLogger("sm_bt.ros.backend")
 
 
+def answer(client: Any, request: Any, timeout: float) -> Any | None:
+    """``client``'s answer to ``request``, waited for up to ``timeout`` s while another thread spins
+    its node; None if none came (the request is then removed: the client would keep it forever). An
+    error the call ended with is raised."""
+    done = threading.Event()
+    future = client.call_async(request)
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout):
+        client.remove_pending_request(future)
+        return None
+    return future.result()
+
+
 class NodeCalls:
     """Calls through the clients of ``node``, timed by ``clock``, booked under ``lock`` (the
     backend's). ``process_heard(peer)``: when ``peer``'s process was last heard (lock held);

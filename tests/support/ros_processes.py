@@ -259,21 +259,17 @@ def ros_context_fixture() -> Iterator[RosContext]:
 
 
 def call(client: Any, request: Any, timeout: float = 1.0) -> Any:
-    """The response of ``client`` to ``request``; ``AssertionError`` after ``timeout`` seconds.
+    """The response of ``client`` to ``request`` (the executor spins elsewhere: ``answer``);
+    ``AssertionError`` after ``timeout`` seconds."""
+    from sm_bt.ros.node_calls import answer
 
-    Waits on an event set by the future (the executor spins elsewhere); on timeout the pending
-    request is removed, or the client would keep it forever.
-    """
-    done = threading.Event()
-    future = client.call_async(request)
-    future.add_done_callback(lambda _: done.set())
-    if not done.wait(timeout):
-        client.remove_pending_request(future)
+    try:
+        response = answer(client, request, timeout)
+    except Exception as error:
+        raise AssertionError(f"{client.srv_name}: call failed: {error!r}") from error
+    if response is None:
         raise AssertionError(f"{client.srv_name}: no response within {timeout} s to {request}")
-    exception = future.exception()
-    if exception is not None:
-        raise AssertionError(f"{client.srv_name}: call failed: {exception!r}")
-    return future.result()
+    return response
 
 
 def wait_until(condition: Callable[[], bool], timeout: float, message: str, poll: float = 0.01) -> float:
