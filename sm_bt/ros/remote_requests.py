@@ -11,7 +11,8 @@ An outcome may come before the answer that names its number (the topic and the s
 channels): the fleet's own outcomes are kept until then. An answer may also never come: a server
 that has not yet discovered a new client's reply reader drops its reply (seen under load, the
 fleet's first change of a robot just started). So an outcome still unclaimed :data:`ANSWER_GRACE` s
-later ends the one unanswered call that asked what it says (``settle``). A robot that goes out of reach fails the
+later ends the one unanswered call that asked what it says (``settle``; what it asked is read from
+the outcome's description, ``change_mode PART MODE``). A robot that goes out of reach fails the
 requests it owes (its numbers start again if its manager restarts), and an outcome that never comes
 fails its request after ``timeout`` seconds (the robot's requests all end within its own request
 timeout: only a lost message gets there).

@@ -138,8 +138,8 @@ class RobotCalls:
         and its answer, if it comes, is ignored. False, and nothing done, unless exactly one owed call
         asked that."""
         with self._lock:
-            calls = [call for call in robot.owed.values() if call.told is not None and call.told_by == told_by]
-        return len(calls) == 1 and calls[0].told is not None and calls[0].told(result)
+            told = [call.told for call in robot.owed.values() if call.told is not None and call.told_by == told_by]
+        return len(told) == 1 and told[0](result)
 
     def call(self, robot: Robot, client: Any, request: Any, label: str, answered: Callable[[Any], None],
              failed: Callable[[str], None], timeout: float | None = None, *, checked: bool = True,
