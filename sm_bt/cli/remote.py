@@ -25,7 +25,7 @@ from typing import Any
 
 from sm_bt.cli.arguments import non_negative, positive
 from sm_bt.cli.common import CliError, UsageError
-from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, TRANSITION_GOALS
 
 DEFAULT_TIMEOUT = 10.0
 #: `sm-bt mode hold`'s lease: how long a hold outlives a command that died (renewed every third).
@@ -177,6 +177,8 @@ def run_mode(args: argparse.Namespace) -> int:
             print("\n".join(lines))
             return 0 if possible else 1
         asks = args.priority is not None or args.requester is not None or args.queue
+        if args.wait:
+            client.listen(part, "mode")
         if asks or client.offers(part, "request_change"):
             accepted, reason = client.request_change(part, mode=args.mode, requester=args.requester or "",
                                                      priority=-1 if args.priority is None else args.priority,
@@ -225,6 +227,8 @@ def run_state(args: argparse.Namespace) -> int:
         return 0
 
     def put(client: Any) -> int:
+        if args.wait:
+            client.listen(part, "state")
         if args.priority is not None or args.requester is not None:  # through sm-bt manager, always
             accepted, reason = client.request_change(part, transition=args.transition, requester=args.requester or "",
                                                      priority=-1 if args.priority is None else args.priority)
@@ -250,7 +254,7 @@ def _confirm_state(client: Any, args: argparse.Namespace, part: str, managed: bo
         print(f"{part}: {args.transition} accepted" + (" (its mode manager may undo it)" if managed else ""))
         return 0
     seconds = client.wait_for_state(part, args.transition, client.sent)
-    reached = client.get_state(part)
+    reached = TRANSITION_GOALS[args.transition]  # confirmed: asked again, a managed node may be back already
     print(f"{part}: {reached} {seconds:.2f} s after the request")
     if managed:
         final = client.state_after(part, SETTLE)

@@ -105,6 +105,8 @@ EDGE_OF: dict[Transition, TransitionEdge] = {step.transition: step for step in R
 
 #: The requestable transitions by label, in lifecycle order (``shutdown`` resolves by start state).
 REQUESTABLE_LABELS: tuple[str, ...] = ("configure", "activate", "deactivate", "cleanup", "shutdown")
+#: The state a requestable transition (by label) ends in when it succeeds.
+TRANSITION_GOALS: dict[str, str] = {step.transition.label: step.goal.label for step in REQUESTABLE}
 
 #: Where a transition state goes for each callback outcome, with the transition id reported.
 OUTCOMES: dict[State, dict[Outcome, tuple[Transition, State]]] = {

@@ -28,14 +28,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sm_bt.engine.lifecycle import REQUESTABLE, REQUESTABLE_LABELS, transition_by_label
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, TRANSITION_GOALS, transition_by_label
 from sm_bt.model.diagnostics import did_you_mean
 from sm_bt.model.errors import Error
 from sm_bt.model.states import State
 from sm_bt.ros.environment import prepare, require_ros
 
-#: The state a lifecycle transition (by label) ends in when it succeeds.
-TRANSITION_GOALS = {step.transition.label: step.goal.label for step in REQUESTABLE}
 #: Discovery time after which a manager that serves other parts, but not the one asked for, means
 #: a wrong name rather than a slow network.
 DISCOVERY_GRACE = 2.0
@@ -105,6 +103,8 @@ class ModeClient:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._clients: dict[str, Any] = {}
+        #: Event subscriptions made by :meth:`listen` before a request, by topic: each with what it heard.
+        self._listening: dict[str, tuple[Any, list[tuple[float, Any]]]] = {}
         #: When the last request went out (``time.monotonic()``), once its service was found.
         self.sent = 0.0
 
@@ -333,9 +333,7 @@ class ModeClient:
     def wait_for_mode(self, part: str, mode: str, since: float) -> float:
         """Seconds from ``since`` (``time.monotonic()``) until ``get_mode`` answers ``mode``;
         :class:`NotConfirmed` after ``timeout``."""
-        from system_modes_msgs.msg import ModeEvent
-
-        return self._wait(ModeEvent, f"/{part}/mode_event", lambda: self.get_mode(part) == mode, since,
+        return self._wait(*_event_topic(part, "mode"), lambda: self.get_mode(part) == mode, since,
                           lambda: f"{part} is in mode {self.get_mode(part) or '(none)'!r}, not {mode!r}",
                           lambda event: bool(event.goal_mode.label == mode),
                           _Watched(part, f"change_mode {part} {mode}"))
@@ -368,16 +366,39 @@ class ModeClient:
         return bool(self._call(ChangeState, part, "change_state", request).success)
 
     def wait_for_state(self, part: str, transition: str, since: float) -> float:
-        from lifecycle_msgs.msg import TransitionEvent
-
         goal = TRANSITION_GOALS[transition]
-        return self._wait(TransitionEvent, f"/{part}/transition_event", lambda: self.get_state(part) == goal, since,
+        return self._wait(*_event_topic(part, "state"), lambda: self.get_state(part) == goal, since,
                           lambda: f"{part} is {self.get_state(part)}, not {goal}",
                           lambda event: bool(event.goal_state.label == goal),
                           # a node's own service was asked, not the manager: only a system's counts
                           _Watched(part, f"change_state {part} {transition}", systems_only=True))
 
     # -- waiting ---------------------------------------------------------------------------------------
+
+    def listen(self, part: str, kind: str) -> None:
+        """Subscribe now to the part's ``kind`` events ("mode" or "state"), before a request whose
+        confirmation will be waited for is sent. A subscription needs discovery before it hears
+        anything: made only when the wait starts, it can miss a quick transition's event, and a
+        node's manager may undo that transition before a poll sees it."""
+        message_type, topic = _event_topic(part, kind)
+        if topic not in self._listening:
+            woken: list[tuple[float, Any]] = []
+            self._listening[topic] = (self._subscribe(message_type, topic, woken), woken)
+
+    def stop_listening(self) -> None:
+        """Drop what :meth:`listen` subscribed to and no wait took."""
+        for subscription, _ in self._listening.values():
+            self.node.destroy_subscription(subscription)
+        self._listening.clear()
+
+    def _subscribe(self, message_type: Any, topic: str, woken: list[tuple[float, Any]]) -> Any:
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        # Volatile: matches a node's volatile transition_event and the manager's latched topics alike
+        # (only what comes now: the first ask in the wait covers what was there before).
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+        return self.node.create_subscription(message_type, topic, lambda event: woken.append((time.monotonic(), event)),
+                                             qos)
 
     def _wait(self, message_type: Any, topic: str, reached: Callable[[], bool], since: float,
               where: Callable[[], str], tells: Callable[[Any], bool], request: _Watched) -> float:
@@ -387,15 +408,18 @@ class ModeClient:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-        woken: list[tuple[float, Any]] = []
         failures: list[str] = []
-        # Volatile: matches a node's volatile transition_event and the manager's latched topics alike
-        # (only what comes now: the first ask below covers what was there before). Made after the
-        # manager accepted the request, so every /diagnostics message heard was sent after that.
+        listened = self._listening.pop(topic, None)
+        if listened is None:
+            woken: list[tuple[float, Any]] = []
+            listened = (self._subscribe(message_type, topic, woken), woken)
+        else:  # heard since listen(): only what came after the request counts
+            woken = listened[1]
+            woken[:] = [(at, event) for at, event in woken if at >= since]
+        # Made after the manager accepted the request, so every /diagnostics message heard was sent after that.
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
         subscriptions = [
-            self.node.create_subscription(message_type, topic, lambda event: woken.append((time.monotonic(), event)),
-                                          qos),
+            listened[0],
             self.node.create_subscription(DiagnosticArray, "/diagnostics",
                                           lambda message: failures.extend(request.failures(message)), qos)]
         try:
@@ -419,6 +443,17 @@ class ModeClient:
         finally:
             for subscription in subscriptions:
                 self.node.destroy_subscription(subscription)
+
+
+def _event_topic(part: str, kind: str) -> tuple[Any, str]:
+    """The message type and topic of a part's ``kind`` events: "mode" or "state"."""
+    if kind == "mode":
+        from system_modes_msgs.msg import ModeEvent
+
+        return ModeEvent, f"/{part}/mode_event"
+    from lifecycle_msgs.msg import TransitionEvent
+
+    return TransitionEvent, f"/{part}/transition_event"
 
 
 @dataclass(frozen=True)

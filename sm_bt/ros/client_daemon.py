@@ -49,7 +49,7 @@ GRAPH_SETTINGS = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_
 #: The ModeClient methods a command may call through the daemon.
 CALLS = frozenset({"get_mode", "available_modes", "check_mode", "change_mode", "wait_for_mode", "get_state",
                    "change_state", "wait_for_state", "managed_node", "state_after", "preview_change",
-                   "request_change", "offers", "hold_mode"})
+                   "request_change", "offers", "hold_mode", "listen"})
 #: The errors a call may raise, re-raised in the command as the same class.
 ERRORS: dict[str, type[Exception]] = {cls.__name__: cls for cls in (
     client_module.ManagerUnreachable, client_module.UnknownName, client_module.NotConfirmed)}
@@ -207,6 +207,7 @@ class _Server(socketserver.ThreadingMixIn, socketserver.UnixStreamServer):
                                         context=self.context, graph_since=self.started), 0
 
     def give_back(self, mode_client: Any, uses: int) -> None:
+        mode_client.stop_listening()  # a command that listened and then did not wait (refused, failed)
         with self.lock:
             self.active -= 1
             self.last = time.monotonic()

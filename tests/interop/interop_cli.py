@@ -61,11 +61,10 @@ from ros_processes import DISCOVERY_TIMEOUT, NodeProcess, RosContext, Starter, r
 from sm_bt import bundled
 from sm_bt.cli import main
 from sm_bt.cli.app import build_parser
-from sm_bt.engine.lifecycle import REQUESTABLE_LABELS
+from sm_bt.engine.lifecycle import REQUESTABLE_LABELS, TRANSITION_GOALS
 from sm_bt.model import load_model
 from sm_bt.model.states import State
 from sm_bt.model.types import Model, NodePart, SystemPart
-from sm_bt.ros.client import TRANSITION_GOALS
 
 pytestmark = pytest.mark.ros
 

@@ -72,7 +72,7 @@ def test_mode_and_state_commands_drive_the_pilot_and_confirm_each_change(
     assert (code, out) == (1, "") and err.startswith("sm-bt: error: amcl is a node that a mode manager manages: "), err
     assert sm_bt(capsys, "state", "get", "amcl")[1] == "amcl: active\n"  # nothing was sent
     code, out, err = sm_bt(capsys, "state", "set", "amcl", "deactivate", "--wait", "--force")
-    assert re.fullmatch(r"amcl: inactive \d+\.\d\d s after the request\n", out), out
+    assert re.fullmatch(r"amcl: inactive \d+\.\d\d s after the request\n", out), (out, err)
     assert (code, err) == (1, "sm-bt: error: amcl: then active again: its mode manager put it back\n"), err
 
 
@@ -259,6 +259,43 @@ def test_a_transition_is_sent_with_its_id_and_its_label(
         assert sm_bt(capsys, "state", "set", "pilot", transition, "--timeout", "5") == (
             0, f"pilot: {transition} accepted\n", "")
     assert received == [(1, "configure"), (3, "activate"), (4, "deactivate"), (2, "cleanup"), (7, "shutdown")]
+
+
+def test_a_wait_hears_the_event_of_a_transition_undone_before_the_wait_starts(ros_context: RosContext) -> None:
+    """A managed node's forced transition may be done, told and undone by its manager before a
+    wait's own subscription is matched: the client listens from before the request. A stand-in
+    node tells ``inactive`` as soon as a listener is there, while its state stays ``active``."""
+    from lifecycle_msgs.msg import State, TransitionEvent
+    from lifecycle_msgs.srv import ChangeState, GetState
+
+    from sm_bt.ros.client import ModeClient, NotConfirmed
+
+    node = ros_context.node
+    events = node.create_publisher(TransitionEvent, "/amcl/transition_event", 10)
+
+    def change_state(request: ChangeState.Request, response: ChangeState.Response) -> ChangeState.Response:
+        deadline = time.monotonic() + 1.0  # the transition takes as long as discovery, at most 1 s
+        while events.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        events.publish(TransitionEvent(start_state=State(id=State.TRANSITION_STATE_DEACTIVATING, label="deactivating"),
+                                       goal_state=State(id=State.PRIMARY_STATE_INACTIVE, label="inactive")))
+        response.success = True
+        return response
+
+    def get_state(request: GetState.Request, response: GetState.Response) -> GetState.Response:
+        response.current_state = State(id=State.PRIMARY_STATE_ACTIVE, label="active")  # already put back
+        return response
+
+    node.create_service(ChangeState, "/amcl/change_state", change_state)
+    node.create_service(GetState, "/amcl/get_state", get_state)
+    with ModeClient(timeout=3.0, context=ros_context.context, node_name="listening") as client:
+        client.listen("amcl", "state")
+        assert client.change_state("amcl", "deactivate")
+        assert 0.0 <= client.wait_for_state("amcl", "deactivate", client.sent) < 1.0
+    with ModeClient(timeout=3.0, context=ros_context.context, node_name="not_listening") as client:
+        assert client.change_state("amcl", "deactivate")  # told before the wait's subscription was there
+        with pytest.raises(NotConfirmed, match="amcl is active, not inactive"):
+            client.wait_for_state("amcl", "deactivate", client.sent)
 
 
 def test_a_dry_run_asks_the_manager_what_a_change_would_do_and_changes_nothing(
