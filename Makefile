@@ -16,10 +16,11 @@ export ROS_LOG_DIR := $(CURDIR)/build/ros_log
 
 .PHONY: demo test lint docs clean
 
-$(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh sm_bt/view/assets.py
-	@echo "sm_bt: creating $(VENV) and installing the pinned dependencies (ROS 2 Jazzy wheels included; about a minute the first time) ..."
+$(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh tools/install_packages.sh \
+		sm_bt/view/assets.py
+	@echo "sm_bt: creating $(VENV) and installing the pinned dependencies (ROS 2 Jazzy wheels included; about 30 s the first time) ..."
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,ros,docs]'
+	bash tools/install_packages.sh $(VENV) test,ros,docs
 	@echo "sm_bt: dependencies installed; now the interface packages (built once, then cached)"
 	bash tools/ensure_interfaces.sh $(VENV)
 	$(BIN)/python -m sm_bt.view.assets
@@ -40,7 +41,7 @@ demo-ros: $(STAMP)
 
 # The suite in PYTEST_WORKERS parallel workers (pytest-xdist), with Chromium installed while the venv
 # is built, then lint and the documentation's build; prints the wall time of each step (tools/run_tests.sh).
-PYTEST_WORKERS ?= 4
+PYTEST_WORKERS ?= 6
 test:
 	@mkdir -p $(ROS_LOG_DIR)
 	@MAKE="$(MAKE)" VENV="$(VENV)" STAMP="$(STAMP)" PYTEST_WORKERS="$(PYTEST_WORKERS)" bash tools/run_tests.sh
@@ -96,7 +97,7 @@ interop: $(VENV)/.interop
 		tests/interop/interop_py_trees_ros.py
 
 $(VENV)/.interop: $(STAMP) pyproject.toml constraints.txt
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[interop]'
+	bash tools/install_packages.sh $(VENV) interop
 	touch $@
 
 # mypy and griffe (the API reference's reader) cannot follow the editable install's mapping of
