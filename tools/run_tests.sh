@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# What `make test` runs: the environment (Chromium installed meanwhile), the suite in parallel
-# workers, then ruff and mypy, then the documentation's build (warnings are errors); at the end,
+# What `make test` runs: the environment (Chromium installed meanwhile), then the suite in parallel
+# workers with ruff and mypy, and then the documentation's build (warnings are errors), alongside
+# (the suite leaves a core idle now and then: its ROS tests wait on other processes); at the end,
 # the wall time of each step, whatever the outcome.
 #
 #   tools/run_tests.sh [PYTEST ARGS...]     (from the Makefile: MAKE, VENV, STAMP, PYTEST_WORKERS)
 #
-# Most of the suite's time is ROS tests waiting on other processes, so it runs in more workers
+# Much of the suite's time is ROS tests waiting on other processes, so it runs in more workers
 # than there are cores (pytest-xdist; each worker has a ROS domain of its own, see tests/conftest.py).
 # Modules whose tests share a costly fixture (a recorded demo) run whole in one worker (tests/conftest.py).
 set -euo pipefail
@@ -14,10 +15,11 @@ cd "$(dirname "$0")/.."
 make="${MAKE:-make}"
 venv="${VENV:-.venv}"
 stamp="${STAMP:-$venv/.installed}"
-workers="${PYTEST_WORKERS:-4}"
+workers="${PYTEST_WORKERS:-6}"
 start=$SECONDS
 declare -A took=([environment]=0 [tests]=0 [lint]=0 [docs]=0)
 step="environment" since=$SECONDS
+checks=""  # the pid of lint and docs, run alongside the tests
 
 next_step() {  # next_step NAME: the step so far took its time
   took[$step]=$((SECONDS - since))
@@ -27,14 +29,21 @@ next_step() {  # next_step NAME: the step so far took its time
 report() {
   local status=$?
   local failed=""
+  if [[ -n $checks ]]; then  # interrupted while lint or docs ran
+    pkill -P "$checks" 2>/dev/null || true
+    kill "$checks" 2>/dev/null || true
+  fi
   [[ $status == 0 ]] || failed="; failed in the $step step"
-  took[$step]=$((SECONDS - since))
+  [[ $step == environment ]] && took[$step]=$((SECONDS - since))
+  [[ -f build/logs/lint.took ]] && took[lint]=$(<build/logs/lint.took)
+  [[ -f build/logs/docs.took ]] && took[docs]=$(<build/logs/docs.took)
   echo "make test: $((SECONDS - start)) s of wall time (environment ${took[environment]} s," \
-       "tests ${took[tests]} s, lint ${took[lint]} s, docs ${took[docs]} s)$failed"
+       "tests ${took[tests]} s, lint ${took[lint]} s and docs ${took[docs]} s alongside them)$failed"
 }
 trap report EXIT
 
 mkdir -p build/logs
+rm -f build/logs/lint.took build/logs/docs.took
 # Chromium (for the view's browser tests) comes from apt while pip fills the venv.
 bash tools/ensure_chromium.sh >build/logs/chromium.log 2>&1 &
 chromium=$!
@@ -45,16 +54,39 @@ if ! wait "$chromium"; then
 fi
 cat build/logs/chromium.log
 
+# Lint, then the documentation's build, in the background; their output is printed after the tests.
+run_checks() {
+  local begun=$SECONDS
+  "$make" --no-print-directory lint >build/logs/lint.log 2>&1 || { echo "lint failed" >>build/logs/lint.log; return 1; }
+  echo $((SECONDS - begun)) >build/logs/lint.took
+  begun=$SECONDS
+  "$make" --no-print-directory docs >build/logs/docs.log 2>&1 || { echo "docs failed" >>build/logs/docs.log; return 2; }
+  echo $((SECONDS - begun)) >build/logs/docs.took
+}
+run_checks &
+checks=$!
+
 next_step tests
 # Everything must run here: a test whose requirement (ROS, Chromium, root) is missing fails, not skips.
 # A hung test fails on its own (pytest-timeout, pyproject.toml); should the run itself hang (a worker
 # blocked where no signal reaches it), it is interrupted after 15 minutes rather than running into
 # CI's limit with nothing said.
+tests_status=0
 SM_BT_TESTS_NEED_ALL=1 timeout --signal=INT --kill-after=30 900 \
-  "$venv/bin/python" -m pytest -q -n "$workers" --durations=10 "$@"
+  "$venv/bin/python" -m pytest -q -n "$workers" --durations=10 "$@" || tests_status=$?
+took[tests]=$((SECONDS - since))
 
-next_step lint
-"$make" --no-print-directory lint
-
-next_step docs
-"$make" --no-print-directory docs
+checks_status=0
+wait "$checks" || checks_status=$?
+checks=""
+cat build/logs/lint.log
+[[ ! -f build/logs/docs.log ]] || cat build/logs/docs.log
+if ((tests_status != 0)); then
+  step=tests
+  exit "$tests_status"
+fi
+if ((checks_status != 0)); then
+  step=$([[ $checks_status == 1 ]] && echo lint || echo docs)
+  exit "$checks_status"
+fi
+step=done
