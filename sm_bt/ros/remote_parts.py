@@ -66,7 +66,7 @@ from system_modes_msgs.srv import ChangeMode, GetMode
 
 from sm_bt.engine.backend import BackendListener, CallResult, Done, NodeReport
 from sm_bt.engine.clock import WallClock
-from sm_bt.engine.lifecycle import Transition
+from sm_bt.engine.lifecycle import TRANSITION_GOALS, Transition
 from sm_bt.model.remote_parts import MixedModel, check_fleet
 from sm_bt.model.states import State
 from sm_bt.model.types import DEFAULT_MODE, FLEET_REQUESTER, REMOTE_MODE, Model, ParamValue
@@ -202,7 +202,8 @@ class RemoteBackend:
         refused = CallResult(False, refusal, refused=True)
         self._calls.change(robot, robot.change_state, ChangeState.Request(transition=message), label,
                            lambda response: done(CallResult(True) if response.success else refused),
-                           lambda why: done(CallResult(False, why)))
+                           lambda why: done(CallResult(False, why)), told=done,
+                           told_by=("change_state", transition.label))
 
     def set_parameters(self, node: str, parameters: Mapping[str, ParamValue], done: Done) -> None:
         robot = self._robots[node]
@@ -236,7 +237,8 @@ class RemoteBackend:
             done(CallResult(True) if response.success else CallResult(False, refusal))
 
         self._calls.change(robot, robot.change_mode, ChangeMode.Request(mode_name=mode), label, answered,
-                     lambda why: done(CallResult(False, why)))
+                           lambda why: done(CallResult(False, why)),
+                           told=lambda _: answered(ChangeMode.Response(success=True)), told_by=("change_mode", mode))
 
     def _request(self, robot: Robot, request: Any, label: str, done: Done, refusal: str, *,
                  asked: str | None = None, refused: bool = False) -> None:
@@ -418,6 +420,9 @@ class RemoteBackend:
         with self._lock:
             self._calls.heard_event(robot)
             assumed = robot.assumed
+        if robot.reference:  # a transition's answer lost: its event says it was done
+            for label in (label for label, goal in TRANSITION_GOALS.items() if goal == state.label):
+                self._calls.settle(robot, ("change_state", label), CallResult(True))
         if state is State.UNKNOWN:
             if not assumed:
                 self._unknown(robot)
@@ -439,6 +444,8 @@ class RemoteBackend:
             robot.mode_told = robot.mode_told or taken
             if mode == robot.asked and robot.state is State.ACTIVE:
                 robot.asked = None
+        if robot.reference and mode:  # a change_mode's answer lost: its event says it was done
+            self._calls.settle(robot, ("change_mode", mode), CallResult(True))
         if changed:
             self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
 

@@ -31,9 +31,10 @@ REFERENCE_ECHO = 0.2
 
 @dataclass(frozen=True)
 class Owed:
-    """A change call its manager has not answered: ``fail(why)`` ends it failed. A request of an sm-bt
-    robot may also end from the robot's own word, ``told(result)`` (False if the call had ended), once
-    ``told_by`` (what the robot's request says it asked: ``("change_mode", mode)``) matches."""
+    """A change call its manager has not answered: ``fail(why)`` ends it failed. It may also end from
+    the robot's own word, ``told(result)`` (False if the call had ended), once ``told_by`` (what it
+    asked: ``("change_mode", mode)``) matches what an sm-bt robot's request outcome says it asked, or
+    what the reference's event says its system reached."""
 
     fail: Callable[[str], None]
     told: Callable[[Any], bool] | None = None
@@ -113,14 +114,23 @@ class RobotCalls:
                                                              told=told, told_by=told_by))
             return
 
-        def accepted(response: Any) -> None:
-            if robot.reference and response.success:
+        def paced() -> None:
+            if robot.reference:
                 with self._lock:
                     robot.reads_from = robot.requests_from = self._clock.now() + REFERENCE_EVENTS
+
+        def accepted(response: Any) -> None:
+            if robot.reference and response.success:  # an sm-bt robot's answer has no success
+                paced()
             answered(response)
 
-        self.call(robot, client, request, label, accepted, failed, checked=not vouched, owed=True, told=told,
-                  told_by=told_by)
+        def told_so(result: Any) -> None:
+            paced()
+            assert told is not None
+            told(result)
+
+        self.call(robot, client, request, label, accepted, failed, checked=not vouched, owed=True,
+                  told=None if told is None else told_so, told_by=told_by)
 
     def abandon(self, robot: Robot, why: str) -> None:
         """Its manager is out of reach: the change requests it has not answered fail with ``why``, and
@@ -132,11 +142,11 @@ class RobotCalls:
             call.fail(why)
 
     def settle(self, robot: Robot, told_by: tuple[str, str], result: Any) -> bool:
-        """Its manager told how a request of the fleet's ended (``told_by``: what it asked) while the
-        call that made it is still unanswered: the answer was lost (a server that has not discovered a
-        new client's reply reader drops the reply) or is late. The one such call ends with ``result``
-        and its answer, if it comes, is ignored. False, and nothing done, unless exactly one owed call
-        asked that."""
+        """Its manager told how a request of the fleet's ended (``told_by``: what it asked; the
+        reference: an event saying it is there) while the call that made it is still unanswered: the
+        answer was lost (a server that has not discovered a new client's reply reader drops the reply)
+        or is late. The one such call ends with ``result`` and its answer, if it comes, is ignored.
+        False, and nothing done, unless exactly one owed call asked that."""
         with self._lock:
             told = [call.told for call in robot.owed.values() if call.told is not None and call.told_by == told_by]
         return len(told) == 1 and told[0](result)

@@ -22,8 +22,9 @@ import json
 import logging
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from lifecycle_msgs.msg import TransitionEvent
@@ -85,8 +86,9 @@ class ScriptedManager:
         # it does not move), None: never told; first: told before its answer. refusal: refused so.
         self.outcome: str | None = "succeeded"
         self.outcome_first = False
-        # Its answers to request_change held back (a reply lost or late) until `released` is set; on a
-        # node and executor of their own, threads enough for several, so that the rest goes on meanwhile.
+        # Its answers to change requests (change_state, change_mode, request_change) held back (a reply
+        # lost or late) until `released` is set; on a node and executor of their own, threads enough for
+        # several, so that the rest goes on meanwhile.
         self.hold_answers = False
         self.released = threading.Event()
         self.refusal = ""
@@ -100,28 +102,31 @@ class ScriptedManager:
         self.running.set()
         self.reads = 0  # get_mode calls answered
         self._lock = threading.Lock()
+        self._moves: list[threading.Thread] = []
         prefix = "/robot1/pilot"
         self._transition_events = node.create_publisher(TransitionEvent, f"{prefix}/transition_event", 10)
         self._mode_events = node.create_publisher(ModeEvent, f"{prefix}/mode_event", LEASED if lease else 10)
+        import rclpy
+        from rclpy.callback_groups import ReentrantCallbackGroup
+        from rclpy.executors import MultiThreadedExecutor
+
+        self._answers = rclpy.create_node("scripted_answers", context=ros.context)
+        group = ReentrantCallbackGroup()
         self._services = [
             node.create_service(GetState, f"{prefix}/get_state", self._get_state),
             node.create_service(GetMode, f"{prefix}/get_mode", self._get_mode),
-            node.create_service(ChangeState, f"{prefix}/change_state", self._change_state),
-            node.create_service(ChangeMode, f"{prefix}/change_mode", self._change_mode)]
+            self._answers.create_service(ChangeState, f"{prefix}/change_state", self._held(self._change_state),
+                                         callback_group=group),
+            self._answers.create_service(ChangeMode, f"{prefix}/change_mode", self._held(self._change_mode),
+                                         callback_group=group)]
         if outcomes:
             self._outcomes = node.create_publisher(RequestOutcome, f"{prefix}/request_outcome", OUTCOMES)
-            import rclpy
-            from rclpy.callback_groups import ReentrantCallbackGroup
-            from rclpy.executors import MultiThreadedExecutor
-
-            self._answers = rclpy.create_node("scripted_answers", context=ros.context)
             self._services.append(self._answers.create_service(RequestChange, f"{prefix}/request_change",
-                                                               self._answer_change,
-                                                               callback_group=ReentrantCallbackGroup()))
-            self._answering = MultiThreadedExecutor(num_threads=4, context=ros.context)
-            self._answering.add_node(self._answers)
-            threading.Thread(target=self._spin_answers, daemon=True).start()
+                                                               self._held(self._request_change), callback_group=group))
             self._services.append(node.create_service(PreviewChange, f"{prefix}/preview_change", self._preview_change))
+        self._answering = MultiThreadedExecutor(num_threads=8, context=ros.context)
+        self._answering.add_node(self._answers)
+        threading.Thread(target=self._spin_answers, daemon=True).start()
 
     def move(self, state: State, mode: str) -> None:
         """Its system is now ``state`` in ``mode`` (its nodes moved), told as its timer would."""
@@ -153,7 +158,7 @@ class ScriptedManager:
         self._mode_events.publish(event)
 
     def _later(self, state: State, mode: str) -> None:
-        threading.Timer(DELAY, self.move, (state, mode)).start()
+        self._start(threading.Timer(DELAY, self.move, (state, mode)))
 
     def _get_state(self, request: GetState.Request, response: GetState.Response) -> GetState.Response:
         self.running.wait(30.0)  # hung: the executor thread of its node waits here, DDS's threads go on
@@ -198,7 +203,7 @@ class ScriptedManager:
         self.requests.append(f"change_mode {request.mode_name}")
         response.success = True
         if self.sm_bt_switch and self.state is State.ACTIVE:
-            threading.Thread(target=self.switch_as_sm_bt, args=(request.mode_name,)).start()
+            self._start(threading.Thread(target=self.switch_as_sm_bt, args=(request.mode_name,)))
             return response
         with self._lock:
             redundant = self.state is State.ACTIVE and self.mode == request.mode_name
@@ -208,9 +213,16 @@ class ScriptedManager:
         return response
 
 
+    def _start(self, thread: threading.Thread) -> None:
+        """Start a move or a message to come: :meth:`close` waits for it (after the test, its node is gone)."""
+        self._moves.append(thread)
+        thread.start()
+
     def close(self) -> None:
-        """Stop answering request_change (a held answer is let go)."""
+        """Stop answering change requests (a held answer is let go), once the moves under way are done."""
         self.released.set()
+        for thread in self._moves:
+            thread.join(5.0)
         self._answering.shutdown(5.0)
         self._answers.destroy_node()
 
@@ -220,11 +232,13 @@ class ScriptedManager:
         with contextlib.suppress(ExternalShutdownException):
             self._answering.spin()
 
-    def _answer_change(self, request: RequestChange.Request,
-                       response: RequestChange.Response) -> RequestChange.Response:
-        answer = self._request_change(request, response)
-        if self.hold_answers:
-            self.released.wait(30.0)
+    def _held(self, serve: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+        """``serve``, whose answer waits for `released` while answers are held."""
+        def answer(request: Any, response: Any) -> Any:
+            answered = serve(request, response)
+            if self.hold_answers:
+                self.released.wait(30.0)
+            return answered
         return answer
 
     def _request_change(self, request: RequestChange.Request,
@@ -247,10 +261,10 @@ class ScriptedManager:
                 self.move(State.ACTIVE, request.mode)
             return response
         if outcome == "succeeded" and self.sm_bt_switch and self.state is State.ACTIVE:
-            threading.Thread(target=self.switch_as_sm_bt, args=(request.mode,)).start()
+            self._start(threading.Thread(target=self.switch_as_sm_bt, args=(request.mode,)))
         elif outcome == "succeeded":
             self._later(State.ACTIVE, request.mode)
-        threading.Timer(2 * DELAY, self._outcomes.publish, (told,)).start()
+        self._start(threading.Timer(2 * DELAY, self._outcomes.publish, (told,)))
         return response
 
 
@@ -264,8 +278,10 @@ class ScriptedManager:
 
 
 @pytest.fixture
-def scripted(ros_context: RosContext) -> ScriptedManager:
-    return ScriptedManager(ros_context)
+def scripted(ros_context: RosContext) -> Iterator[ScriptedManager]:
+    scripted = ScriptedManager(ros_context)
+    yield scripted
+    scripted.close()
 
 
 @pytest.fixture
@@ -342,6 +358,29 @@ def test_a_robot_its_manager_knows_nothing_of_is_taken_for_unconfigured_and_brou
     assert scripted.requests[2:] == ["change_state 4", "change_mode f_performance_mode"]
     assert (scripted.state, scripted.mode) == (State.ACTIVE, "f_performance_mode")
     assert str(manager.actual("fleet")) == "active.FAST"
+
+
+def test_a_change_whose_answer_is_lost_ends_when_the_references_events_say_it_was_done(
+        scripted: ScriptedManager, fleet: RosRuntime) -> None:
+    """The reference's answers can be lost as any server's (see the sm-bt robot's case below). It tells
+    no outcome, but its events say where its system went: a change_state or change_mode call still
+    unanswered ends when they say it reached what the call asked, not at the call's timeout (10 s)."""
+    manager = fleet.manager
+    wait_until(lambda: manager.actual("robot1").state is State.UNCONFIGURED, 10.0, "robot1 never taken in")
+    scripted.hold_answers = True
+    for mode, steps in (("__DEFAULT__", 2), ("REST", 1), ("FAST", 1)):
+        request = manager.change_mode("fleet", mode)
+        took = wait_until(lambda request=request: request.done, 15.0, f"fleet {mode} never ended")
+        # each step a tick's event away, and the next paced after it (REFERENCE_EVENTS)
+        assert request.succeeded and took < 3.0 * steps, (mode, took, request.reason)
+    assert scripted.requests == ["change_state 1", "change_mode f_normal_mode", "change_state 4",
+                                 "change_mode f_performance_mode"]
+    scripted.hold_answers = False
+    scripted.released.set()  # the late answers change nothing
+    time.sleep(SETTLE)
+    assert str(manager.actual("fleet")) == "active.FAST"
+    _done(fleet, "__DEFAULT__")
+    assert scripted.requests[4:] == ["change_mode f_normal_mode"]
 
 
 def test_served_by_sm_bt_a_robot_its_manager_knows_nothing_of_stays_out_of_reach(
