@@ -19,6 +19,7 @@ from typing import Any
 
 from sm_bt.engine.clock import WallClock
 from sm_bt.model.states import State
+from sm_bt.ros.node_calls import on_answer
 from sm_bt.ros.remote_requests import RobotRequests
 
 #: The reference sends a change's events at its 1 s timer's next tick, or the one after: its answers
@@ -203,6 +204,6 @@ class RobotCalls:
         if owed:  # before it can end: its callbacks are not attached yet
             with self._lock:
                 robot.owed[key] = Owed(given_up, settled if told is not None else None, told_by)
-        future.add_done_callback(on_done)
+        on_answer(future, on_done, f"{label} to {robot.fqn}")
         self._clock.call_later(limit, lambda: given_up(f"the manager of {robot.part} did not answer {label} "
                                                         f"within {limit:g} s"))
