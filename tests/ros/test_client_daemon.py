@@ -71,9 +71,15 @@ def run_daemon(pids: list[int], *args: str) -> subprocess.Popen[str]:
     process = subprocess.Popen([sys.executable, "-m", "sm_bt.cli", "daemon", "run", *args], text=True,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     pids.append(process.pid)
-    line = line_within(process.stdout, 30.0, "sm-bt daemon run: READY")
-    assert line.startswith("READY "), (line, process.stderr.read() if process.poll() is not None and process.stderr
-                                       else "")
+    # Fast DDS writes its own errors to stdout (seen: a shared-memory port's lock taken, under load),
+    # so READY may come after such lines, as NodesProcess reads it.
+    deadline = time.monotonic() + 30.0
+    before: list[str] = []
+    while not (line := line_within(process.stdout, max(0.1, deadline - time.monotonic()),
+                                   "sm-bt daemon run: READY")).startswith("READY "):
+        before.append(line)
+        assert line and time.monotonic() < deadline, (before, process.stderr.read() if process.poll() is not None
+                                                      and process.stderr else "")
     return process
 
 
