@@ -295,14 +295,27 @@ class _Spinner:
         with contextlib.suppress(ExternalShutdownException):  # the context shut down under us
             if self._plain:
                 while not self._stopping.is_set() and self._context.ok():
-                    self.executor.spin_once()
+                    self._surviving(self.executor.spin_once)
                 return
             while self._context.ok():
                 with self._guard:
                     if self._stopping.is_set():
                         return
                     self._until = Future()
-                self.executor.spin_until_future_complete(self._until, timeout_sec=EVENTS_WAIT)
+                self._surviving(functools.partial(self.executor.spin_until_future_complete, self._until,
+                                                  timeout_sec=EVENTS_WAIT))
+
+    def _surviving(self, spin: Callable[[], object]) -> None:
+        """``spin()``; what a callback raised out of it is logged, and the thread goes on spinning: left
+        to end the thread, it would leave the manager deaf to its nodes and its clients for good."""
+        from rclpy.executors import ExternalShutdownException
+
+        try:
+            spin()
+        except ExternalShutdownException:
+            raise
+        except Exception:
+            log.exception("%s: a callback failed", self._thread.name)
 
     def _wake(self) -> None:
         if self._waker is not None:

@@ -1,6 +1,7 @@
 """The runtime's executor threads over an EventsExecutor: entities of the node may come and go
 from other threads while it waits (never blocked, and served at once), one wait serves a burst of
-messages, a stop ends the wait at once, and the runtime spins the backend's node with one."""
+messages, a stop ends the wait at once, a callback that raises is logged and the spinning goes on,
+and the runtime spins the backend's node with one."""
 
 from __future__ import annotations
 
@@ -130,3 +131,30 @@ def test_the_runtime_spins_the_backends_and_watching_nodes_with_events_executors
         took = time.monotonic() - began
         plain.close()
     assert took < EVENTS_WAIT / 2, f"close() took {took:.2f} s"
+
+
+def test_a_callback_that_raises_is_logged_and_the_spinning_goes_on(spun: tuple[Any, _Spinner],
+                                                                   caplog: pytest.LogCaptureFixture) -> None:
+    """Out of an EventsExecutor's wait, what a timer's or a subscription's callback raised would end
+    the thread: the manager deaf to its nodes and clients from then on."""
+    from std_msgs.msg import String
+
+    node, _ = spun
+    heard: list[str] = []
+
+    def hear(message: String) -> None:
+        heard.append(message.data)
+        if message.data == "bad":
+            raise ValueError("a bug in the callback")
+
+    node.create_subscription(String, "/spun_chatter", hear, 10)
+    publisher = node.create_publisher(String, "/spun_chatter", 10)
+    wait_until(lambda: publisher.get_subscription_count() == 1, 5.0, "the subscription never matched")
+    with caplog.at_level("ERROR", logger="sm_bt.ros.runtime"):
+        publisher.publish(String(data="bad"))
+        wait_until(lambda: heard == ["bad"], 5.0, "the first message never heard")
+        time.sleep(0.2)
+        publisher.publish(String(data="good"))
+        wait_until(lambda: heard == ["bad", "good"], 5.0, f"nothing heard after the callback raised: {heard}")
+    assert any("a callback failed" in record.getMessage() and record.exc_info for record in caplog.records), \
+        caplog.records
