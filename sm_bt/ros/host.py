@@ -79,8 +79,11 @@ class MissionHost:
     def _spin(self) -> None:
         from rclpy.executors import ExternalShutdownException
 
+        from sm_bt.ros.runtime import spun
+
         with contextlib.suppress(ExternalShutdownException):  # the context was shut down under us
-            self._executor.spin()
+            while not spun(self._executor.spin, "sm_bt-mission-spin"):
+                pass  # a callback raised (logged): spin on
 
     def _on_event(self, event: Event) -> None:
         if isinstance(self.manager.model.parts[event.part], SystemPart) and event.actual is not None \

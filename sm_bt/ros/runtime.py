@@ -247,6 +247,22 @@ class RosRuntime:
         self.close()
 
 
+def spun(spin: Callable[[], object], thread: str) -> bool:
+    """``spin()`` (an executor's) in ``thread``: False, with what a callback raised out of it logged,
+    for the thread to spin again. Left to end the thread, it would leave the node deaf to its peers
+    and its clients for good. The context's shutdown (ExternalShutdownException) goes through."""
+    from rclpy.executors import ExternalShutdownException
+
+    try:
+        spin()
+    except ExternalShutdownException:
+        raise
+    except Exception:
+        log.exception("%s: a callback failed", thread)
+        return False
+    return True
+
+
 def _events_executor(context: Any) -> Any:
     """rclpy's EventsExecutor for ``context``, or None where this rclpy has none.
 
@@ -295,27 +311,15 @@ class _Spinner:
         with contextlib.suppress(ExternalShutdownException):  # the context shut down under us
             if self._plain:
                 while not self._stopping.is_set() and self._context.ok():
-                    self._surviving(self.executor.spin_once)
+                    spun(self.executor.spin_once, self._thread.name)
                 return
             while self._context.ok():
                 with self._guard:
                     if self._stopping.is_set():
                         return
                     self._until = Future()
-                self._surviving(functools.partial(self.executor.spin_until_future_complete, self._until,
-                                                  timeout_sec=EVENTS_WAIT))
-
-    def _surviving(self, spin: Callable[[], object]) -> None:
-        """``spin()``; what a callback raised out of it is logged, and the thread goes on spinning: left
-        to end the thread, it would leave the manager deaf to its nodes and its clients for good."""
-        from rclpy.executors import ExternalShutdownException
-
-        try:
-            spin()
-        except ExternalShutdownException:
-            raise
-        except Exception:
-            log.exception("%s: a callback failed", self._thread.name)
+                spun(functools.partial(self.executor.spin_until_future_complete, self._until,
+                                       timeout_sec=EVENTS_WAIT), self._thread.name)
 
     def _wake(self) -> None:
         if self._waker is not None:

@@ -158,3 +158,22 @@ def test_a_callback_that_raises_is_logged_and_the_spinning_goes_on(spun: tuple[A
         wait_until(lambda: heard == ["bad", "good"], 5.0, f"nothing heard after the callback raised: {heard}")
     assert any("a callback failed" in record.getMessage() and record.exc_info for record in caplog.records), \
         caplog.records
+
+
+def test_spun_says_whether_a_callback_raised_and_lets_the_contexts_shutdown_through(
+        caplog: pytest.LogCaptureFixture) -> None:
+    from rclpy.executors import ExternalShutdownException
+
+    from sm_bt.ros.runtime import spun
+
+    def raising(error: BaseException) -> Any:
+        def spin() -> None:
+            raise error
+        return spin
+
+    assert spun(lambda: None, "quiet") is True
+    with caplog.at_level("ERROR", logger="sm_bt.ros.runtime"):
+        assert spun(raising(KeyError("a bug")), "sm_bt-mission-spin") is False
+    assert [record.getMessage() for record in caplog.records] == ["sm_bt-mission-spin: a callback failed"]
+    with pytest.raises(ExternalShutdownException):
+        spun(raising(ExternalShutdownException()), "shut down")
