@@ -103,7 +103,10 @@ def test_a_silent_process_is_unreachable_within_the_window_then_reacquired(
     manager = runtime.manager
     with Stopped(nodes) as stopped:
         took = wait_until(lambda: not manager.observation("amcl").reachable, 5.0, "still reachable")
-        assert took <= WINDOW + LATENCY, f"unreachable after {took:.2f} s"
+        # Seen once in a full run: judged after 3.0 s (COMMON_CAP), as if another process of this host
+        # were silent too. The graph's nodes say whether one of an earlier test was still there.
+        assert took <= WINDOW + LATENCY, (f"unreachable after {took:.2f} s ({manager.observation('amcl').gone}); "
+                                          f"the graph's nodes: {sorted(runtime.node.get_node_names_and_namespaces())}")
         names = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
         # One verdict for the process: its nodes are reported one after the other, at once.
         wait_until(lambda: not any(manager.observation(name).reachable for name in names), 0.2, "not all unreachable")
