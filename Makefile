@@ -40,8 +40,9 @@ demo-ros: $(STAMP)
 	$(BIN)/sm-bt demo --ros
 
 # The suite in PYTEST_WORKERS parallel workers (pytest-xdist), with Chromium installed while the venv
-# is built, then lint and the documentation's build; prints the wall time of each step (tools/run_tests.sh).
-PYTEST_WORKERS ?= 6
+# is built, and lint and the documentation's build alongside; prints the wall time of each step
+# (tools/run_tests.sh).
+PYTEST_WORKERS ?= 4
 test:
 	@mkdir -p $(ROS_LOG_DIR)
 	@MAKE="$(MAKE)" VENV="$(VENV)" STAMP="$(STAMP)" PYTEST_WORKERS="$(PYTEST_WORKERS)" bash tools/run_tests.sh
