@@ -54,6 +54,8 @@ log = logging.getLogger("sm_bt.ros.runtime")
 
 #: The reference manager's node name.
 MANAGER_NODE_NAME = "__mode_manager"
+#: After a callback raised out of an executor's spin, its thread waits this long before it spins again.
+FAILED_PAUSE = 0.01
 #: How long the EventsExecutor waits at a time (see the module's doc).
 EVENTS_WAIT = 1.0
 
@@ -249,8 +251,9 @@ class RosRuntime:
 
 def spun(spin: Callable[[], object], thread: str) -> bool:
     """``spin()`` (an executor's) in ``thread``: False, with what a callback raised out of it logged,
-    for the thread to spin again. Left to end the thread, it would leave the node deaf to its peers
-    and its clients for good. The context's shutdown (ExternalShutdownException) goes through."""
+    for the thread to spin again (after :data:`FAILED_PAUSE`, so that a failure that repeats cannot
+    take a core). Left to end the thread, it would leave the node deaf to its peers and its clients
+    for good. The context's shutdown (ExternalShutdownException) goes through."""
     from rclpy.executors import ExternalShutdownException
 
     try:
@@ -259,6 +262,7 @@ def spun(spin: Callable[[], object], thread: str) -> bool:
         raise
     except Exception:
         log.exception("%s: a callback failed", thread)
+        time.sleep(FAILED_PAUSE)
         return False
     return True
 
