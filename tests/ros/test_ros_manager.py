@@ -321,7 +321,8 @@ def manager_process(tmp_path: Path) -> Iterator[subprocess.Popen[str]]:
 
 
 def test_a_plain_client_changes_the_mode_of_actuation_and_sees_mode_event(
-        node_processes: Starter, manager_process: subprocess.Popen[str], ros_context: RosContext) -> None:
+        node_processes: Starter, manager_process: subprocess.Popen[str], ros_context: RosContext,
+        tmp_path: Path) -> None:
     node_processes("actuation")
     ros = ros_context
     change_mode = ros.client(ChangeMode, "/actuation/change_mode")
@@ -360,7 +361,15 @@ def test_a_plain_client_changes_the_mode_of_actuation_and_sees_mode_event(
     assert event.timestamp >= before, "a real timestamp"
     assert call(get_mode, GetMode.Request(), 2.0).current_mode == "PERFORMANCE"
     # Topics of their own: under load they may arrive after the mode_event (seen: a fresh-clone run).
-    wait_until(lambda: any(r.goal_mode.label == "PERFORMANCE" for r in requests), 5.0, "no mode_request_info")
+    # Seen twice in fresh clones, the manager alive and its mode_event heard: none came in 5 s. Whether
+    # this subscriber ever matched the manager's writer, and what the manager logged, say more next time.
+    try:
+        wait_until(lambda: any(r.goal_mode.label == "PERFORMANCE" for r in requests), 5.0, "no mode_request_info")
+    except AssertionError as error:
+        info = ros.node.get_publishers_info_by_topic("/actuation/mode_request_info")
+        raise AssertionError(f"{error}; heard {[(r.start_mode.label, r.goal_mode.label) for r in requests]}; "
+                             f"writers in the graph: {len(info)}; the manager's log:\n"
+                             f"{(tmp_path / 'manager.log').read_text()[-3000:]}") from None
     wait_until(lambda: transitions and transitions[-1].goal_state.id == StateMsg.PRIMARY_STATE_ACTIVE, 5.0,
                "no transition_event to active")
     assert transitions[-1].start_state.id != StateMsg.PRIMARY_STATE_ACTIVE
