@@ -254,7 +254,7 @@ def _confirm_state(client: Any, args: argparse.Namespace, part: str, managed: bo
         print(f"{part}: {args.transition} accepted" + (" (its mode manager may undo it)" if managed else ""))
         return 0
     seconds = client.wait_for_state(part, args.transition, client.sent)
-    reached = TRANSITION_GOALS[args.transition]  # confirmed: asked again, a managed node may be back already
+    reached = TRANSITION_GOALS[args.transition]  # confirmed; not asked again: a managed node may be back already
     print(f"{part}: {reached} {seconds:.2f} s after the request")
     if managed:
         final = client.state_after(part, SETTLE)

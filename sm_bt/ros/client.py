@@ -220,12 +220,10 @@ class ModeClient:
         """The node's state once ``seconds`` passed with no change, or more (each change starts
         the wait again; at most ``timeout`` s in all): what holds once its manager had its say."""
         from lifecycle_msgs.msg import TransitionEvent
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
         changed: list[float] = []
-        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
         subscription = self.node.create_subscription(TransitionEvent, f"/{part}/transition_event",
-                                                     lambda event: changed.append(time.monotonic()), qos)
+                                                     lambda event: changed.append(time.monotonic()), _volatile())
         try:
             began = time.monotonic()
             while True:
@@ -392,13 +390,8 @@ class ModeClient:
         self._listening.clear()
 
     def _subscribe(self, message_type: Any, topic: str, woken: list[tuple[float, Any]]) -> Any:
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
-        # Volatile: matches a node's volatile transition_event and the manager's latched topics alike
-        # (only what comes now: the first ask in the wait covers what was there before).
-        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
         return self.node.create_subscription(message_type, topic, lambda event: woken.append((time.monotonic(), event)),
-                                             qos)
+                                             _volatile())
 
     def _wait(self, message_type: Any, topic: str, reached: Callable[[], bool], since: float,
               where: Callable[[], str], tells: Callable[[Any], bool], request: _Watched) -> float:
@@ -406,7 +399,6 @@ class ModeClient:
         arrived), or ``reached()`` asked now and then (and after any other event); the failure of
         ``request`` on ``/diagnostics`` ends it with :class:`NotConfirmed`."""
         from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
         failures: list[str] = []
         listened = self._listening.pop(topic, None)
@@ -417,11 +409,10 @@ class ModeClient:
             woken = listened[1]
             woken[:] = [(at, event) for at, event in woken if at >= since]
         # Made after the manager accepted the request, so every /diagnostics message heard was sent after that.
-        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
         subscriptions = [
             listened[0],
             self.node.create_subscription(DiagnosticArray, "/diagnostics",
-                                          lambda message: failures.extend(request.failures(message)), qos)]
+                                          lambda message: failures.extend(request.failures(message)), _volatile())]
         try:
             deadline = since + self.timeout
             next_poll = 0.0
@@ -443,6 +434,15 @@ class ModeClient:
         finally:
             for subscription in subscriptions:
                 self.node.destroy_subscription(subscription)
+
+
+def _volatile() -> Any:
+    """The QoS of every subscription of a wait: volatile, it matches a node's volatile topics and the
+    manager's latched ones alike, and hears only what comes now (a wait asks first for what was
+    there before)."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
 def _event_topic(part: str, kind: str) -> tuple[Any, str]:
