@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # What `make test` runs: the environment (Chromium installed meanwhile), then the suite in parallel
-# workers with ruff and mypy, and then the documentation's build (warnings are errors), alongside
-# (the suite leaves a core idle now and then: its ROS tests wait on other processes); at the end,
-# the wall time of each step, whatever the outcome.
+# workers, and alongside it ruff, mypy and the documentation's build (warnings are errors): the
+# suite leaves a core idle now and then, its ROS tests waiting on other processes. At the end, the
+# wall time of each step, whatever the outcome.
 #
 #   tools/run_tests.sh [PYTEST ARGS...]     (from the Makefile: MAKE, VENV, STAMP, PYTEST_WORKERS)
 #
@@ -43,7 +43,7 @@ report() {
 trap report EXIT
 
 mkdir -p build/logs
-rm -f build/logs/lint.took build/logs/docs.took
+rm -f build/logs/lint.took build/logs/docs.took build/logs/lint.log build/logs/docs.log
 # Chromium (for the view's browser tests) comes from apt while pip fills the venv.
 bash tools/ensure_chromium.sh >build/logs/chromium.log 2>&1 &
 chromium=$!
@@ -67,15 +67,15 @@ run_checks &
 checks=$!
 
 next_step tests
-# Everything must run here: a test whose requirement (ROS, Chromium, root) is missing fails, not skips.
-# A hung test fails on its own (pytest-timeout, pyproject.toml); should the run itself hang (a worker
-# blocked where no signal reaches it), it is interrupted after 15 minutes rather than running into
-# CI's limit with nothing said.
 # Collected first by one process that may write bytecode, so that pytest keeps its rewritten test
 # modules and every worker reads them: where PYTHONDONTWRITEBYTECODE=1 is set (CI machines) none would
 # be kept, and each worker would rewrite them all (about 8 s of CPU each instead of 3).
 env -u PYTHONDONTWRITEBYTECODE "$venv/bin/python" -m pytest --collect-only -q -p no:cacheprovider "$@" \
   >build/logs/collect.log 2>&1 || true  # a collection error is the run's to report
+# Everything must run here: a test whose requirement (ROS, Chromium, root) is missing fails, not skips.
+# A hung test fails on its own (pytest-timeout, pyproject.toml); should the run itself hang (a worker
+# blocked where no signal reaches it), it is interrupted after 15 minutes rather than running into
+# CI's limit with nothing said.
 tests_status=0
 SM_BT_TESTS_NEED_ALL=1 timeout --signal=INT --kill-after=30 900 \
   "$venv/bin/python" -m pytest -q -n "$workers" --durations=10 "$@" || tests_status=$?
@@ -85,7 +85,7 @@ checks_status=0
 wait "$checks" || checks_status=$?
 checks=""
 cat build/logs/lint.log
-[[ ! -f build/logs/docs.log ]] || cat build/logs/docs.log
+[[ ! -f build/logs/docs.log ]] || cat build/logs/docs.log  # not built when lint failed
 if ((tests_status != 0)); then
   step=tests
   exit "$tests_status"
