@@ -148,28 +148,49 @@ class ModeManagerServer:
         # A remote part's interface is its own manager's: served here, a name could be both.
         served = [name for name, part in manager.model.parts.items()
                   if isinstance(part, SystemPart) or (nodes and part.remote is None)]
+        systems = {name: isinstance(manager.model.parts[name], SystemPart) for name in served}
         for name in served:
-            self._serve(name, isinstance(manager.model.parts[name], SystemPart))
+            self._advertise(name, systems[name])
         with manager.lock:  # the current values first, then every change: none missed, none stale
             for name in served:
                 self._publish_actual(name, manager.actual(name))
             self._subscription: Subscription | None = manager.subscribe(
                 self._on_event, None if len(served) == len(manager.model.parts) else served,
                 kinds=(EventKind.ACTUAL, EventKind.TARGET))
+        # The services last: a request is taken as soon as its service exists, and what it changes
+        # must find the topics there and the subscription made (or its request info is never told).
+        for name in served:
+            self._serve(name, systems[name])
 
     def close(self) -> None:
+        # In the reverse order of the making: no request is taken once nothing would tell of it.
+        for service in self._services:
+            self._node.destroy_service(service)
+        self._services.clear()
         if self._subscription is not None:
             self._subscription.cancel()
             self._subscription = None
         self._outcomes.clear()  # a request that ends from now on is told nowhere
-        for service in self._services:
-            self._node.destroy_service(service)
         for publisher in self._publishers:
             self._node.destroy_publisher(publisher)
-        self._services.clear()
         self._publishers.clear()
 
     # -- set-up --------------------------------------------------------------------------------------
+
+    def _advertise(self, part: str, system: bool) -> None:
+        base = qualified_name(part, self.namespace)
+
+        def publisher(kind: Any, name: str, qos: QoSProfile = LATCHED) -> Any:
+            created = removable.publisher(self._node, kind, f"{base}/{name}", qos)
+            self._publishers.append(created)
+            return created
+
+        self._mode_events[part] = publisher(ModeEvent, "mode_event", MODE_EVENTS)
+        self._mode_requests[part] = publisher(ModeEvent, "mode_request_info")
+        self._transition_requests[part] = publisher(TransitionEvent, "transition_request_info")
+        self._outcomes[part] = publisher(RequestOutcome, "request_outcome", OUTCOMES)
+        if system:
+            self._transition_events[part] = publisher(TransitionEvent, "transition_event")
 
     def _serve(self, part: str, system: bool) -> None:
         base = qualified_name(part, self.namespace)
@@ -179,26 +200,16 @@ class ModeManagerServer:
             callback = _never_raising(f"{base}/{name}", answer, _failure_response(kind))
             self._services.append(node.create_service(kind, f"{base}/{name}", callback))
 
-        def publisher(kind: Any, name: str, qos: QoSProfile = LATCHED) -> Any:
-            created = removable.publisher(node, kind, f"{base}/{name}", qos)
-            self._publishers.append(created)
-            return created
-
         service(ChangeMode, "change_mode", lambda req, res: self._change_mode(part, req, res))
         service(GetMode, "get_mode", lambda req, res: self._get_mode(part, res))
         service(GetAvailableModes, "get_available_modes", lambda req, res: self._get_available_modes(part, res))
         service(PreviewChange, "preview_change", lambda req, res: self._preview_change(part, req, res))
         service(RequestChange, "request_change", lambda req, res: self._request_change(part, req, res))
         service(HoldMode, "hold_mode", lambda req, res: self._hold_mode(part, req, res))
-        self._mode_events[part] = publisher(ModeEvent, "mode_event", MODE_EVENTS)
-        self._mode_requests[part] = publisher(ModeEvent, "mode_request_info")
-        self._transition_requests[part] = publisher(TransitionEvent, "transition_request_info")
-        self._outcomes[part] = publisher(RequestOutcome, "request_outcome", OUTCOMES)
         if system:
             service(ChangeState, "change_state", lambda req, res: self._change_state(part, req, res))
             service(GetState, "get_state", lambda req, res: self._get_state(part, res))
             service(GetAvailableStates, "get_available_states", lambda req, res: self._get_available_states(res))
-            self._transition_events[part] = publisher(TransitionEvent, "transition_event")
 
     # -- services (executor thread) --------------------------------------------------------------------
 

@@ -23,6 +23,7 @@ from lifecycle_msgs.msg import TransitionEvent
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_processes import RosContext, wait_until
 from system_modes_msgs.msg import ModeEvent
+from system_modes_msgs.srv import ChangeMode
 
 from sm_bt.ros.manager_node import ModeManagerServer
 from sm_bt.sim import SimulatedSystem
@@ -125,3 +126,35 @@ def test_subscribers_hear_only_what_is_true_when_they_hear_it(world: World, plan
     finally:
         for subscription in subscriptions:
             world.client.node.destroy_subscription(subscription)
+
+
+def test_a_request_taken_the_moment_its_service_exists_is_told_on_the_topics(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Seen in a full run: a client's ``change_mode``, answered while the manager was still making
+    its interface (seconds under load), was never told on ``mode_request_info``: the services came
+    before the topics and the manager's subscription. Here the request waits for the service and
+    is taken the moment it exists."""
+    serving, client = RosContext("sm_bt_first_request_server"), RosContext("sm_bt_first_request_client")
+    system = SimulatedSystem("pilot", transition_delay=0.0, parameter_delay=0.0, recovery=False)
+    heard: list[Any] = []
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    client.node.create_subscription(ModeEvent, "/pilot/mode_request_info", heard.append, latched)
+    answers: list[bool] = []
+    create_service = serving.node.create_service
+
+    def taken_at_once(kind: Any, name: str, callback: Any, **options: Any) -> Any:
+        made = create_service(kind, name, callback, **options)
+        if name == "/pilot/change_mode":
+            answers.append(callback(ChangeMode.Request(mode_name="f_normal_mode"), ChangeMode.Response()).success)
+        return made
+
+    monkeypatch.setattr(serving.node, "create_service", taken_at_once)
+    server = ModeManagerServer(serving.node, system.manager)
+    try:
+        assert answers == [True]
+        wait_until(lambda: any(m.goal_mode.label == "f_normal_mode" for m in heard), 10.0,
+                   "the request was never told on /pilot/mode_request_info")
+    finally:
+        server.close()
+        system.close()
+        client.close()
+        serving.close()
