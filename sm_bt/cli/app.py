@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from typing import Any
 
 from sm_bt.cli.common import PROG, CliError, Command, UsageError
 from sm_bt.model.diagnostics import did_you_mean
@@ -105,13 +106,24 @@ COMMANDS: list[Command] = [
 ]
 
 
-def _version() -> str:
-    from importlib import metadata
+class _Version(argparse.Action):
+    """``--version``: the installed package's version, looked up only when asked (importlib.metadata
+    alone is a fifth of a short command's start)."""
 
-    try:
-        return metadata.version("sm-bt")
-    except metadata.PackageNotFoundError:
-        return "unknown"
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help="show program's version number and exit")
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        from importlib import metadata
+
+        try:
+            version = metadata.version("sm-bt")
+        except metadata.PackageNotFoundError:
+            version = "unknown"
+        print(f"{parser.prog} {version}")  # on stdout, as argparse's own version action
+        parser.exit()
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
@@ -120,7 +132,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG, description="System modes for py_trees mission trees: check and inspect SMH model files, run the "
                     "demo, watch modes, serve the mode manager on ROS 2.")
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for command in COMMANDS:
         child = sub.add_parser(command.name, help=command.help, description=command.description or command.help)
