@@ -39,6 +39,9 @@ RESPONSE_PATH_GRACE = 0.3
 IDEMPOTENT = frozenset({"GetState", "GetMode", "GetAvailableModes", "GetAvailableStates", "GetAvailableTransitions",
                         "GetParameters", "ListParameters", "SetParameters", "SetParametersAtomically"})
 SHM = Path("/dev/shm")
+#: The environment of a node process a test kills with SIGKILL and waits to see leave the ROS graph:
+#: a lease of 2 s instead of Fast DDS's 20 s (short_lease.xml), the same verdict 18 s sooner.
+SHORT_LEASE = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(Path(__file__).with_name("short_lease.xml"))}
 
 
 class NodeProcess(NodesProcess):
