@@ -42,7 +42,7 @@ demo-ros: $(STAMP)
 # The suite in PYTEST_WORKERS parallel workers (pytest-xdist), with Chromium installed while the venv
 # is built, and lint and the documentation's build alongside; prints the wall time of each step
 # (tools/run_tests.sh).
-PYTEST_WORKERS ?= 4
+PYTEST_WORKERS ?= 5
 test:
 	@mkdir -p $(ROS_LOG_DIR)
 	@MAKE="$(MAKE)" VENV="$(VENV)" STAMP="$(STAMP)" PYTEST_WORKERS="$(PYTEST_WORKERS)" bash tools/run_tests.sh

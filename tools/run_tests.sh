@@ -15,7 +15,7 @@ cd "$(dirname "$0")/.."
 make="${MAKE:-make}"
 venv="${VENV:-.venv}"
 stamp="${STAMP:-$venv/.installed}"
-workers="${PYTEST_WORKERS:-4}"
+workers="${PYTEST_WORKERS:-5}"
 start=$SECONDS
 declare -A took=([environment]=0 [tests]=0 [lint]=0 [docs]=0)
 step="environment" since=$SECONDS
