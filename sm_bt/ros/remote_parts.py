@@ -162,8 +162,11 @@ class RemoteBackend:
             self._node.create_subscription(ModeEvent, f"{robot.fqn}/mode_event",
                                            lambda message: self._mode_event(robot, message), _EVENTS)]
         if robot.requests is not None:
-            robot.subscriptions.append(self._node.create_subscription(
-                RequestOutcome, f"{robot.fqn}/request_outcome", robot.requests.ended, OUTCOMES))
+            outcomes = self._node.create_subscription(RequestOutcome, f"{robot.fqn}/request_outcome",
+                                                      robot.requests.ended, OUTCOMES)
+            robot.subscriptions.append(outcomes)
+            with self._lock:
+                robot.outcomes = outcomes
         with self._lock:
             self._probes.schedule(robot, 0.0)
 
@@ -179,6 +182,8 @@ class RemoteBackend:
             self._liveliness = None
         for robot in self._robots.values():
             robot.liveliness = None
+            with self._lock:
+                robot.outcomes, robot.outcomes_matched = None, False
             for subscription in robot.subscriptions:
                 self._node.destroy_subscription(subscription)
             robot.subscriptions = []

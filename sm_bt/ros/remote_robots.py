@@ -6,7 +6,8 @@ at its next 1 s tick) for news of its nodes: a request made before that tick is 
 wrong view and never ends (seen: ``deactivating`` for good). So after a change it accepted, its
 word is taken from its events, from its answers only :data:`REFERENCE_EVENTS` s later (it
 sometimes sends no event at all), and its next request is made no sooner, nor sooner than
-:data:`REFERENCE_ECHO` s after its last event. sm-bt manager needs no pacing.
+:data:`REFERENCE_ECHO` s after its last event. sm-bt manager needs no pacing: a request to it only
+waits, once after it comes in reach, for the fleet to hear its request outcomes (:data:`OUTCOMES_MATCH`).
 """
 
 from __future__ import annotations
@@ -28,6 +29,14 @@ REFERENCE_EVENTS = 2.2
 #: After an event of the reference, its next request waits this long: its own node mode_events of
 #: the same tick, which it takes for news of its nodes, are back with it by then.
 REFERENCE_ECHO = 0.2
+#: An sm-bt robot's request waits up to this long for the fleet's reader of its ``request_outcome``
+#: to match the robot's writer (then until it is next out of reach, no more): that topic is volatile,
+#: and it alone tells the end of a request whose answer was lost, as a new client's first answers are
+#: when its reply reader matches late (seen under load: the fleet's first change over ten robots
+#: waited the call's timeout for four of them).
+OUTCOMES_MATCH = 2.0
+#: How often the match is looked at meanwhile.
+OUTCOMES_POLL = 0.02
 
 
 @dataclass(frozen=True)
@@ -79,6 +88,9 @@ class Robot:
     owed: dict[int, Owed] = field(default_factory=dict)  # change calls unanswered
     #: Its manager's services the graph showed this client since it was last in reach (see RobotCalls.change).
     seen_ready: set[Any] = field(default_factory=set)
+    outcomes: Any = None  # the subscription to an sm-bt manager's request_outcome
+    outcomes_matched: bool = False  # it matched the manager's writer since the robot was last in reach
+    outcomes_due: float | None = None  # a request waits for that match until then (OUTCOMES_MATCH)
 
 
 class RobotCalls:
@@ -101,14 +113,15 @@ class RobotCalls:
                failed: Callable[[str], None], *, told: Callable[[Any], None] | None = None,
                told_by: tuple[str, str] = ("", "")) -> None:
         """A change request (see :meth:`call`), owed until answered (:meth:`abandon`); to the
-        reference, paced (see the module). To a manager whose process DDS vouches for, it is sent
+        reference, paced (see the module); to sm-bt manager, once its request outcomes reach the fleet
+        (:data:`OUTCOMES_MATCH`). To a manager whose process DDS vouches for, it is sent
         without asking the graph whether the service is there, once the graph has shown it since the
         robot was last out of reach: a fleet's switch asks every robot at once, and that question,
         slow under load, let the first robots' work delay the rest of the sends (README, "Fleets").
         The first time, it is asked: until a client has seen the service, the answer may find no
         way back to it."""
         with self._lock:
-            wait = robot.requests_from - self._clock.now() if robot.reference else 0.0
+            wait = robot.requests_from - self._clock.now() if robot.reference else self._unmatched(robot)
             vouched = robot.present and robot.lively
         if wait > 0:
             self._clock.call_later(wait, lambda: self.change(robot, client, request, label, answered, failed,
@@ -133,12 +146,27 @@ class RobotCalls:
         self.call(robot, client, request, label, accepted, failed, checked=not vouched, owed=True,
                   told=None if told is None else told_so, told_by=told_by)
 
+    def _unmatched(self, robot: Robot) -> float:
+        """(With the lock held.) How long an sm-bt robot's request waits before it looks again whether
+        its request_outcome reader matched (0: it did, or waited long enough; see OUTCOMES_MATCH)."""
+        if robot.outcomes is None or robot.outcomes_matched:
+            return 0.0
+        if robot.outcomes.get_publisher_count() > 0:
+            robot.outcomes_matched, robot.outcomes_due = True, None
+            return 0.0
+        now = self._clock.now()
+        if robot.outcomes_due is None:
+            robot.outcomes_due = now + OUTCOMES_MATCH
+        return OUTCOMES_POLL if now < robot.outcomes_due else 0.0
+
     def abandon(self, robot: Robot, why: str) -> None:
         """Its manager is out of reach: the change requests it has not answered fail with ``why``, and
-        its services are asked of the graph again (it may come back as another process)."""
+        its services are asked of the graph again (it may come back as another process), its
+        request_outcome's match looked at again."""
         with self._lock:
             owed, robot.owed = list(robot.owed.values()), {}
             robot.seen_ready.clear()
+            robot.outcomes_matched, robot.outcomes_due = False, None
         for call in owed:
             call.fail(why)
 

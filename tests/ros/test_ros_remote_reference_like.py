@@ -76,10 +76,14 @@ LEASED = QoSProfile(depth=10, liveliness=LivelinessPolicy.AUTOMATIC,
 class ScriptedManager:
     """``/robot1/pilot`` served as the reference serves it; ``requests`` lists what it was asked.
     ``lease``: its ``mode_event`` offers sm-bt manager's liveliness lease (the reference offers none).
-    ``outcomes``: it serves sm-bt manager's ``request_change`` and ``request_outcome``."""
+    ``outcomes``: it serves sm-bt manager's ``request_change`` and ``request_outcome``, whose writer it
+    makes ``outcomes_after`` s late (what it tells meanwhile is lost, as under load an outcome is that
+    a fleet's new reader has not matched yet)."""
 
-    def __init__(self, ros: RosContext, *, lease: bool = False, outcomes: bool = False) -> None:
+    def __init__(self, ros: RosContext, *, lease: bool = False, outcomes: bool = False,
+                 outcomes_after: float = 0.0) -> None:
         node = ros.node
+        self._node = node
         self.state, self.mode = State.UNKNOWN, "unknown"
         self.requests: list[str] = []
         # How its next requests end on request_outcome: "succeeded" or "failed" once it moved (failed:
@@ -119,8 +123,13 @@ class ScriptedManager:
                                          callback_group=group),
             self._answers.create_service(ChangeMode, f"{prefix}/change_mode", self._held(self._change_mode),
                                          callback_group=group)]
+        self._outcomes: Any = None
+        self.lost_outcomes = 0
+        if outcomes and outcomes_after > 0:
+            self._start(threading.Timer(outcomes_after, self._open_outcomes))
+        elif outcomes:
+            self._open_outcomes()
         if outcomes:
-            self._outcomes = node.create_publisher(RequestOutcome, f"{prefix}/request_outcome", OUTCOMES)
             self._services.append(self._answers.create_service(RequestChange, f"{prefix}/request_change",
                                                                self._held(self._request_change), callback_group=group))
             self._services.append(node.create_service(PreviewChange, f"{prefix}/preview_change", self._preview_change))
@@ -226,6 +235,19 @@ class ScriptedManager:
         self._answering.shutdown(5.0)
         self._answers.destroy_node()
 
+    def _open_outcomes(self) -> None:
+        with self._lock:
+            self._outcomes = self._node.create_publisher(RequestOutcome, "/robot1/pilot/request_outcome", OUTCOMES)
+
+    def _tell_outcome(self, message: RequestOutcome) -> None:
+        """Published; lost before its writer is made, as DDS loses a volatile message sent before the
+        reader matched the writer (which, between two nodes of one process as here, it does at once)."""
+        with self._lock:
+            lost = self._outcomes is None
+            self.lost_outcomes += lost
+        if not lost:
+            self._outcomes.publish(message)
+
     def _spin_answers(self) -> None:
         from rclpy.executors import ExternalShutdownException
 
@@ -256,7 +278,7 @@ class ScriptedManager:
         if outcome is None:
             return response
         if self.outcome_first:
-            self._outcomes.publish(told)
+            self._tell_outcome(told)
             if outcome == "succeeded":
                 self.move(State.ACTIVE, request.mode)
             return response
@@ -264,7 +286,7 @@ class ScriptedManager:
             self._start(threading.Thread(target=self.switch_as_sm_bt, args=(request.mode,)))
         elif outcome == "succeeded":
             self._later(State.ACTIVE, request.mode)
-        self._start(threading.Timer(2 * DELAY, self._outcomes.publish, (told,)))
+        self._start(threading.Timer(2 * DELAY, self._tell_outcome, (told,)))
         return response
 
 
@@ -571,6 +593,35 @@ def test_served_by_sm_bt_a_request_whose_answer_is_lost_ends_with_the_outcome_th
         _done(runtime, "__DEFAULT__")
         assert scripted.requests == ["request_change f_performance_mode [fleet]",
                                      "request_change f_normal_mode [fleet]", "request_change f_normal_mode [fleet]"]
+
+
+def test_served_by_sm_bt_a_request_waits_until_the_robots_outcomes_reach_the_fleet(
+        ros_context: RosContext, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Seen in make bench under load: a new fleet's first change over ten robots waited the call's
+    timeout for four of them, their answers lost (a new client's reply reader matches late) and
+    their outcomes too (sent before the fleet's reader matched the robot's writer). Here the robot's
+    writer is made late, its answers are held, and it tells the outcome the moment it can: the
+    fleet's request waits for the match, then ends with the outcome."""
+    import sm_bt.ros.remote_robots
+
+    monkeypatch.setattr(sm_bt.ros.remote_robots, "OUTCOMES_MATCH", 10.0)  # a loaded machine's match included
+    scripted = ScriptedManager(ros_context, lease=True, outcomes=True, outcomes_after=2.0)
+    try:
+        scripted.move(State.ACTIVE, "f_normal_mode")
+        scripted.outcome_first, scripted.hold_answers = True, True
+        runtime = _fleet(tmp_path, extra="")
+        try:
+            wait_until(lambda: str(runtime.manager.actual("robot1")) == "active.f_normal_mode", 10.0,
+                       "robot1 never read")
+            request = runtime.manager.change_mode("fleet", "FAST")
+            wait_until(lambda: request.done, 10.0, "the fleet's request never ended (its outcome was lost)")
+            assert request.succeeded, request.reason
+            assert str(runtime.manager.actual("robot1")) == "active.f_performance_mode"
+            assert scripted.lost_outcomes == 0, "asked before the fleet could hear how it ended"
+        finally:
+            runtime.close()
+    finally:
+        scripted.close()
 
 
 def test_served_by_sm_bt_a_robots_failed_or_refused_request_fails_the_fleets_at_once_with_its_reason(
