@@ -359,13 +359,17 @@ def test_a_part_is_judged_unserved_by_the_parts_of_its_own_namespace_only(
         ros_context: RosContext, monkeypatch: pytest.MonkeyPatch) -> None:
     """Robots of a fleet share a domain: another robot's manager, discovered first, does not make
     this robot's part unknown (it waits for the timeout); a sibling of its own namespace does."""
+    import sm_bt.ros.client
     from sm_bt.ros.client import ModeClient, UnknownName
 
     class NeverReady:
         def service_is_ready(self) -> bool:
             return False
 
-    client = ModeClient(timeout=3.5, context=ros_context.context)
+    # The discovery's waits scaled down (2 s and 1 s, a timeout of 3.5 s): the same verdicts, sooner.
+    monkeypatch.setattr(sm_bt.ros.client, "DISCOVERY_GRACE", 0.2)
+    monkeypatch.setattr(sm_bt.ros.client, "DISCOVERY_SETTLED", 0.1)
+    client = ModeClient(timeout=0.6, context=ros_context.context)
     try:
         monkeypatch.setattr(client, "served_parts", lambda: ["robot2/pilot", "pilot"])
         assert client._found(NeverReady(), "robot1/pilot") is False  # still discovering: not a typo
