@@ -493,7 +493,7 @@ def check_load(data: bytes, path: Path) -> str:
     """Write ``data`` to ``path``, load it, check the outcome (see the module's docstring); return it."""
     try:
         outcome = _checked_load(data, path)
-    except BaseException:
+    except Exception:  # not an interrupt of the run (Ctrl-C), which the summary counted as a crash
         OUTCOMES["crash"] += 1  # an exception other than ModelError, or a broken promise of the oracle
         raise
     OUTCOMES[outcome] += 1
