@@ -122,13 +122,14 @@ def test_a_silent_process_is_unreachable_within_the_window_then_reacquired(
 
 
 def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diagnostics_say_so(
-        node_processes: Starter, runtime: RosRuntime, ros_context: RosContext) -> None:
+        node_processes: Starter, runtime: RosRuntime, ros_context: RosContext,
+        monkeypatch: pytest.MonkeyPatch) -> None:
     nodes = node_processes("pilot", "--state", "inactive", env=UDP_ONLY)
     received = diagnostics_of(ros_context)
     _reachable(runtime)
     wait_until(lambda: statuses(received, "pilot"), 5.0, "no /diagnostics")
     manager = runtime.manager
-    clients = {name: runtime.backend._peers[name].change_state for name in NODES}
+    changes = _changes_sent(runtime, monkeypatch)
     with Stopped(nodes) as stopped, Starved() as starved:
         request = manager.change_mode("pilot", "f_normal_mode")
         assert not request.refused, "the manager did not know yet: accepted"
@@ -143,11 +144,15 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
         assert took <= window + LATENCY + starved.worst, (
             f"ended {took:.2f} s after the node stopped answering (stopped at {stopped.at:.2f}, window "
             f"{window:g} s, this process stood still for at most {starved.worst:.2f} s)")
-        # The configure requests abandoned unanswered are dropped with their clients: a DDS writer
-        # would send them again once the node answers, and the node would configure late.
+        # The changes abandoned unanswered are dropped with their clients: a DDS writer would send
+        # them again once the node answers, and the node would activate late. (The clients are
+        # renewed just after the verdict is reported: waited for.)
         wait_until(lambda: not any(manager.observation(name).reachable for name in NODES), 1.0, "not all unreachable")
-        renewed = [name for name in NODES if runtime.backend._peers[name].change_state is not clients[name]]
-        assert "amcl" in renewed and "pointcloud_to_laser" not in renewed, renewed  # the latter stays inactive
+        assert changes and {name for name, _, _ in changes} <= {"amcl", "controller_server", "laser_resender"}, \
+            changes  # pointcloud_to_laser stays inactive
+        wait_until(lambda: all(client not in (runtime.backend._peers[name].change_state,
+                                              runtime.backend._peers[name].set_parameters)
+                               for name, _, client in changes), 1.0, f"not all renewed: {changes}")
         # What the manager knows now: the change is refused as a whole, and changes nothing.
         refused = manager.change_mode("pilot", "f_degraded_mode")
         assert refused.refused and "not reachable" in refused.reason
@@ -169,6 +174,22 @@ def test_a_change_in_flight_on_a_silent_process_fails_within_the_window_and_diag
         wait_until(lambda: [s for _, s in statuses(received, "amcl") if s.level == ERROR], 1.0, "amcl not in ERROR")
         amcl = [status for _, status in statuses(received, "amcl") if status.level == ERROR]
         assert REASON.search(amcl[-1].message) and _values(amcl[-1])["reachable"] == "false"
+
+
+def _changes_sent(runtime: RosRuntime, monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, str, Any]]:
+    """(node, service, client) of every change the backend sends from now on (not its probes and
+    queries), in order: a list that fills as they go out."""
+    calls = runtime.backend._calls
+    sent: list[tuple[str, str, Any]] = []
+    send = calls.call
+
+    def recorded(peer: Any, client: Any, *args: Any, **kwargs: Any) -> Any:
+        if kwargs.get("busy", True) and not kwargs.get("probe", False):
+            sent.append((peer.part, client.srv_name.rsplit("/", 1)[-1], client))
+        return send(peer, client, *args, **kwargs)
+
+    monkeypatch.setattr(calls, "call", recorded)
+    return sent
 
 
 def _values(status: Any) -> dict[str, str]:
