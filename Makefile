@@ -18,7 +18,7 @@ export ROS_LOG_DIR := $(CURDIR)/build/ros_log
 
 $(STAMP): pyproject.toml constraints.txt $(ROS_IFACE_SRCS) tools/ensure_interfaces.sh tools/install_packages.sh \
 		sm_bt/view/assets.py
-	@echo "sm_bt: creating $(VENV) and installing the pinned dependencies (ROS 2 Jazzy wheels included; about 30 s the first time) ..."
+	@echo "sm_bt: creating $(VENV) and installing the pinned dependencies (ROS 2 Jazzy wheels included; 15-30 s, minutes where the interface packages are built) ..."
 	$(PYTHON) -m venv --without-pip $(VENV)
 	bash tools/install_packages.sh $(VENV) test,ros,docs
 	@echo "sm_bt: dependencies installed; now the interface packages (built once, then cached)"

@@ -20,8 +20,16 @@ quiet=(--quiet --disable-pip-version-check)
 
 has_pip() { "$py" -m pip --version >/dev/null 2>&1; }
 
-uv_installed() {  # uv in the venv, from its own pip or else from the base Python's
+# uv's pinned binary, kept outside the checkout as the interface wheels are (tools/ensure_interfaces.sh):
+# the next venv of this machine copies it instead of asking pip (3 s).
+uv_pin="$(grep -m1 '^uv==' constraints.txt)"
+uv_kept="${SM_BT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/sm_bt}/tools/${uv_pin/==/-}/uv"
+
+uv_installed() {  # uv in the venv: kept from an earlier venv, else from its own pip or the base Python's
   [[ -x $venv/bin/uv ]] && return 0
+  if [[ -x $uv_kept ]] && cp "$uv_kept" "$venv/bin/uv" 2>/dev/null && "$venv/bin/uv" --version >/dev/null 2>&1; then
+    return 0
+  fi
   if has_pip; then
     "$py" -m pip install "${quiet[@]}" -c constraints.txt uv
   else
@@ -30,6 +38,8 @@ uv_installed() {  # uv in the venv, from its own pip or else from the base Pytho
     "$base" -m pip --python "$py" install "${quiet[@]}" -c constraints.txt uv 2>/dev/null \
       || { "$py" -m ensurepip --default-pip >/dev/null && "$py" -m pip install "${quiet[@]}" -c constraints.txt uv; }
   fi
+  # Kept for the next venv (an unwritable cache only costs the next one these 3 s).
+  { mkdir -p "${uv_kept%/uv}" && cp "$venv/bin/uv" "$uv_kept.$$" && mv "$uv_kept.$$" "$uv_kept"; } 2>/dev/null || true
 }
 
 uv=("$venv/bin/uv" pip install --quiet --python "$py" --link-mode=hardlink -c constraints.txt)
