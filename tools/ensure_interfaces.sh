@@ -35,14 +35,14 @@ fi
 rel() { echo "${1#"$root"/}"; }
 
 # A built wheel into the venv: with the venv's uv where tools/install_packages.sh put one (0.3 s
-# against pip's 3 s of CPU each), byte-compiled as the other packages are; else with pip.
+# against pip's 3 s of CPU each), byte-compiled as the other packages are; with pip where there is
+# no uv, or it fails.
 install_wheel() {
-  if [[ -x $venv/bin/uv ]]; then
-    "$venv/bin/uv" pip install --quiet --python "$py" --no-deps --offline --reinstall --compile-bytecode \
-      --link-mode=hardlink "$1"
-  else
-    "$py" -m pip install --no-deps --no-index --force-reinstall --disable-pip-version-check -q "$1"
+  if [[ -x $venv/bin/uv ]] && "$venv/bin/uv" pip install --quiet --python "$py" --no-deps --offline --reinstall \
+      --compile-bytecode --link-mode=hardlink "$1"; then
+    return 0
   fi
+  "$py" -m pip install --no-deps --no-index --force-reinstall --disable-pip-version-check -q "$1"
 }
 
 # While a build runs, a line every 10 s: the time so far and the step the log shows (pip's phase,
@@ -217,7 +217,7 @@ PY
   rm -f "$stamp"
   if ! out="$(install_wheel "$whl" 2>&1)"; then
     echo "$out" >&2
-    die "pip install of $(rel "$whl") into $venv failed (output above)." \
+    die "installing $(rel "$whl") into $venv failed (output above)." \
         "If the wheel is damaged, delete $(rel "$cache") and re-run."
   fi
   if ! err="$(check 2>&1)"; then
