@@ -12,7 +12,7 @@ lossy link, where reliable DDS delivery retransmits, is slow, not gone (:meth:`L
 
 A probe that is late (past twice its expected round trip, ``escalate_interval`` s at least) is
 backed by more, on paths of their own (the other nodes of the process, their other query
-services), one at first and twice as many every ``escalate_interval`` s of silence: reliable DDS
+services), two at first and twice as many every ``escalate_interval`` s of silence: reliable DDS
 delivers each reader's samples in order and repairs a lost one only after the writer's next
 heartbeat, so a lost datagram holds back its own path, not the others, and a link that just
 turned lossy still gets an answer through within the window while a cut gets none.
@@ -60,6 +60,8 @@ COMMON_SHARE = 0.5
 #: ... for at most this many seconds of silence: then every silent process is judged (the storm
 #: after a large participant left lasted 1-2.5 s with 200 nodes in 10 processes on 2 cores).
 COMMON_CAP = 3.0
+#: A late probe is backed by this many more at first, then twice as many every escalate_interval s.
+FIRST_BACKUPS = 2
 #: Fast DDS's vendor id, the first two bytes of its GUID prefixes; the host id follows.
 FAST_DDS_VENDOR = b"\x01\x0f"
 
@@ -111,8 +113,7 @@ class Liveness:
         with self._lock:
             members = self.members(peer)
             window = self.window(members)
-            # The round trip behind the window: a member probed only now and then (a backup probe)
-            # still has the estimate of the link as it was.
+            # The round trip behind the window (a member that joined since has none yet).
             timed = [m for m in members if m.srtt is not None]
             slowest = max(timed, key=estimate, default=None)
             return Link(slowest.srtt if slowest is not None else None, window, window > self.liveness_timeout + SLACK)
@@ -193,10 +194,16 @@ class Liveness:
     def sample(self, call: NodeCall, now: float) -> None:
         """A probe answered (lock held): its round trip is the link's (and the executor's), unless
         its process had work of ours or a transition meanwhile (queued behind a callback, the
-        answer says nothing of the link)."""
-        if call.probe and not any(member.busy or member.settled >= call.sent or member.state_heard >= call.sent
-                                  for member in self.members(call.peer)):
-            call.peer.sample(now - call.sent)
+        answer says nothing of the link). The nodes of a process share its link, and each takes
+        the sample: one probed only by a backup probe once would otherwise keep the estimate of the
+        link as it was then, and the process's window with it, long after the link recovered."""
+        if not call.probe:
+            return
+        members = self.members(call.peer)
+        if not any(member.busy or member.settled >= call.sent or member.state_heard >= call.sent
+                   for member in members):
+            for member in {call.peer, *members}:
+                member.sample(now - call.sent)
 
     @staticmethod
     def share(peers: list[Peer]) -> set[Peer]:
@@ -274,7 +281,7 @@ class Liveness:
         if due:
             self.probe(peer, now)
 
-    def _escalate(self, peer: Peer, probe: NodeCall, count: int = 1) -> None:
+    def _escalate(self, peer: Peer, probe: NodeCall, count: int = FIRST_BACKUPS) -> None:
         """``probe`` is late: while it is, every ``escalate_interval`` s with no word from the process,
         ``count`` more probes (doubling each time) on paths of their own (see the module's doc),
         until every path has one. A link that just turned bad gets an answer through within the

@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import re
 import signal
+import threading
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -17,10 +18,12 @@ import pytest
 from model_files import bundled
 from ros_processes import SHORT_LEASE, NodeProcess, RosContext, Starter, Starved, wait_until
 
+from sm_bt.engine.clock import WallClock
 from sm_bt.engine.requests import Request
 from sm_bt.model.states import State
 from sm_bt.ros.backend import RosBackend
-from sm_bt.ros.liveness import MAX_WINDOW
+from sm_bt.ros.liveness import MAX_WINDOW, Liveness
+from sm_bt.ros.peers import NodeCall, Peer, Presence
 from sm_bt.ros.runtime import RosRuntime
 
 pytestmark = pytest.mark.ros
@@ -46,6 +49,33 @@ def test_the_defaults_are_the_ones_these_tests_time() -> None:
     defaults = inspect.signature(RosBackend).parameters
     assert defaults["liveness_timeout"].default == WINDOW
     assert defaults["probe_interval"].default < WINDOW / 2
+
+
+def test_a_window_widened_by_a_slow_backup_probe_narrows_again_once_the_link_recovers() -> None:
+    """Regression (a stress run): a bad link's backup probe, answered late on another node of the
+    process, left that node's estimate, and the process's window, wide for good after the link
+    recovered (2.2 s instead of 0.9 s, 30 s later): the nodes of a process share its link's estimate."""
+    peers = {name: Peer(name, f"/{name}", (), *(None,) * 6, presence=Presence.PRESENT, participant=b"\x01\x0f\x00\x01")
+             for name in ("amcl", "laser_resender")}
+    clock = WallClock()
+    liveness = Liveness(peers, threading.Lock(), clock, lambda *args, **kwargs: None, lambda *verdicts: None,
+                        lambda peer, state: None, lambda: True, call_timeout=10.0, probe_interval=0.3,
+                        liveness_timeout=WINDOW, escalate_interval=0.05)
+    for peer in peers.values():
+        liveness.joined(peer)
+    amcl, resender = peers["amcl"], peers["laser_resender"]
+
+    def answered(peer: Peer, rtt: float) -> None:
+        liveness.sample(NodeCall(peer, "get_state (liveness)", None, sent=100.0, probe=True), 100.0 + rtt)
+
+    answered(amcl, 0.003)
+    answered(resender, 1.0)  # the backup probe of a turn for the worse
+    assert liveness.window([amcl, resender]) > 2.0
+    for _ in range(40):  # 12 s of the chain's probes of amcl on the recovered link
+        answered(amcl, 0.003)
+    assert liveness.window([amcl, resender]) == WINDOW
+    assert liveness.link(resender).window == WINDOW and not liveness.link(resender).slow
+    clock.close()
 
 
 @pytest.fixture
