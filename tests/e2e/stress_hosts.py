@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import time
 
+import partitions
 import pytest
 from hosts import Hosts, two_hosts_fixture  # noqa: F401
 
@@ -55,3 +56,44 @@ def test_a_cut_link_makes_the_nodes_unknown_and_a_healed_one_brings_them_back(tw
     assert hosts.sm_bt("mode", "get", "amcl")[1] != "amcl: unknown\n"
     print(f"unknown {unknown_after:.2f} s after the cut ({cut_answers}); inactive again {back_after:.2f} s after "
           f"the heal ({heal_answers})")
+
+
+#: Abrupt turns of the link from plain to lossy (30 % of frames lost each way, the rest 0.2 s late).
+TURNS, LOSS, DELAY = 30, 0.3, 0.2
+NODES = ("amcl", "controller_server", "pointcloud_to_laser", "laser_resender")
+#: The liveness window on a plain link (the manager's default).
+LIVENESS = 0.9
+
+
+def test_a_link_that_turns_lossy_at_once_is_seldom_taken_for_a_cut(two_hosts: Hosts) -> None:
+    """Each turn comes once the manager's window is back at its plain-link width, so that the first
+    lost answers come before it has adapted: its backup probes must get an answer through within
+    0.9 s of the last. Counts the turns after which the manager took the nodes for gone."""
+    hosts = two_hosts
+    diagnostics = hosts.watch("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    hosts.nodes("pilot", "--state", "inactive")
+    manager = hosts.manager("pilot")
+
+    def settled(since: float) -> None:
+        """Every node reachable, behind a plain link's window, in a message after ``since``."""
+        give_up = since + 30.0
+        while True:
+            seen = partitions.latest(diagnostics, since)
+            if all(seen.get(node, {}).get("reachable") == "true"
+                   and float(seen[node].get("liveness_window_s") or 99) <= LIVENESS + 0.01 for node in NODES):
+                return
+            assert time.monotonic() < give_up, f"not settled within 30 s: {seen}\n{manager.stderr}"
+            time.sleep(0.1)
+
+    taken = []
+    for turn in range(TURNS):
+        settled(time.monotonic())
+        before = len(manager.lines("vanished"))
+        hosts.lossy(LOSS, DELAY)
+        time.sleep(2.0)  # past the first window, and a few probes over the bad link
+        hosts.lossy(0.0, 0.0)
+        if len(manager.lines("vanished")) > before:
+            taken.append(turn)
+    print(f"MEASURED a link turning lossy at once ({LOSS:.0%} loss, {DELAY * 1000:.0f} ms each way): taken for a cut "
+          f"after {len(taken)} of {TURNS} turns {taken}; relay {hosts.relay_stats()}")
+    assert len(taken) <= TURNS // 10, manager.lines("vanished")
