@@ -166,7 +166,13 @@ def test_a_lossy_link_is_slow_not_gone_and_changes_complete(two_hosts: Hosts) ->
     hosts = two_hosts
     _, manager, diagnostics = start(hosts, "--state", "inactive")
     hosts.lossy(LOSS, DELAY)
-    time.sleep(5.0)  # idle on the bad link: its first lost answers come before the window has adapted
+    time.sleep(5.0)  # idle on the bad link while the window adapts to it
+    # Its first lost answers come before the window has adapted: the backup probes usually get one
+    # through in time, not always (in CI once; make stress counts how often). Nodes taken for gone then
+    # are taken back at their next answers, over the bad link, and from then on they are slow, not gone.
+    at_the_turn = manager.lines("vanished")
+    for node in NODES:
+        diagnostics.wait_for(reachable(node), timeout=20.0, since=time.monotonic())
     took = []
     for mode in ("f_normal_mode", "f_degraded_mode"):
         code, _, err = hosts.sm_bt("mode", "set", "pilot", mode, "--wait", "--timeout", "20")
@@ -175,11 +181,12 @@ def test_a_lossy_link_is_slow_not_gone_and_changes_complete(two_hosts: Hosts) ->
         assert done, manager.stderr
         took.append(float(re.findall(r"succeeded in ([\d.]+) s", done[-1])[0]))
     print(f"MEASURED lossy link ({LOSS:.0%} loss, {DELAY * 1000:.0f} ms each way): changes confirmed in "
-          f"{', '.join(f'{t:.2f}' for t in took)} s; relay {hosts.relay_stats()}")
+          f"{', '.join(f'{t:.2f}' for t in took)} s; taken for a cut at the turn: {bool(at_the_turn)}; "
+          f"relay {hosts.relay_stats()}")
     # The switch to degraded takes five ordered steps, each a round trip of 0.4 s or more (a lost
     # datagram costs about another): it completes, its time is reported, not bounded.
     assert took[0] <= LOSSY_CHANGE, took
-    assert not manager.lines("vanished"), manager.lines("vanished")
+    assert manager.lines("vanished") == at_the_turn, manager.stderr
     assert hosts.relay_stats()["dropped"] > 0
     # The manager's view names the link as it is: slow (not gone), with the round trip it measures
     # (at least the relay's 2 x DELAY; its estimate converges as probes go on) behind a wider window.
