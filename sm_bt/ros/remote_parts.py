@@ -258,7 +258,7 @@ class RemoteBackend:
                 return
             if asked is not None:
                 self._accepted(robot, asked)
-            requests.accepted(int(response.request), label, done)
+            requests.accepted(int(response.request), label, done, asks)
 
         def told(result: CallResult) -> None:  # its outcome came, its answer did not
             if asked is not None and result.ok:
@@ -268,6 +268,12 @@ class RemoteBackend:
         asks = ("change_mode", request.mode) if request.mode else ("change_state", request.transition)
         self._calls.change(robot, robot.request_change, request, label, answered,
                            lambda why: done(CallResult(False, why)), told=told, told_by=asks)
+
+    def _reached(self, robot: Robot, told_by: tuple[str, str]) -> None:
+        """Its events say it is where a change of the fleet's that asked ``told_by`` leads: the change
+        is done, its answer (and, from an sm-bt robot, the request's outcome) lost or late."""
+        if not self._calls.settle(robot, told_by, CallResult(True)) and robot.requests is not None:
+            robot.requests.reached(told_by)
 
     def _settle(self, part: str, told_by: tuple[str, str], result: CallResult) -> bool:
         return self._calls.settle(self._robots[part], told_by, result)
@@ -425,9 +431,9 @@ class RemoteBackend:
         with self._lock:
             self._calls.heard_event(robot)
             assumed = robot.assumed
-        if robot.reference:  # a transition's answer lost: its event says it was done
-            for label in (label for label, goal in TRANSITION_GOALS.items() if goal == state.label):
-                self._calls.settle(robot, ("change_state", label), CallResult(True))
+        # A transition's answer lost (and an sm-bt robot's outcome): its event says it was done.
+        for label in (label for label, goal in TRANSITION_GOALS.items() if goal == state.label):
+            self._reached(robot, ("change_state", label))
         if state is State.UNKNOWN:
             if not assumed:
                 self._unknown(robot)
@@ -449,8 +455,8 @@ class RemoteBackend:
             robot.mode_told = robot.mode_told or taken
             if mode == robot.asked and robot.state is State.ACTIVE:
                 robot.asked = None
-        if robot.reference and mode:  # a change_mode's answer lost: its event says it was done
-            self._calls.settle(robot, ("change_mode", mode), CallResult(True))
+        if mode and (robot.reference or taken):  # a change_mode's answer lost (and outcome): its event says it was done
+            self._reached(robot, ("change_mode", mode))
         if changed:
             self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
 

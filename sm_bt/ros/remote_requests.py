@@ -15,7 +15,9 @@ later ends the one unanswered call that asked what it says (``settle``; what it 
 the outcome's description, ``change_mode PART MODE``). A robot that goes out of reach fails the
 requests it owes (its numbers start again if its manager restarts), and an outcome that never comes
 fails its request after ``timeout`` seconds (the robot's requests all end within its own request
-timeout: only a lost message gets there).
+timeout: only a lost message gets there), unless the robot's events say it got where the request
+leads (``reached``): under load a new fleet's first requests lost both their answers and their
+outcomes (the robot had not yet matched the fleet's readers), while the robot's latched events came.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ ANSWER_GRACE = 0.5
 class _Pending:
     label: str
     done: Done
+    told_by: tuple[str, str] = ("", "")
     timer: Any = None
 
 
@@ -59,12 +62,13 @@ class RobotRequests:
         self._pending: dict[int, _Pending] = {}
         self._early: OrderedDict[int, tuple[CallResult, tuple[str, str]]] = OrderedDict()
 
-    def accepted(self, number: int, label: str, done: Done) -> None:
-        """Its manager accepted ``label`` as request ``number``: ``done`` when it ends."""
+    def accepted(self, number: int, label: str, done: Done, told_by: tuple[str, str] = ("", "")) -> None:
+        """Its manager accepted ``label`` (which asked ``told_by``) as request ``number``: ``done`` when
+        it ends."""
         with self._lock:
             early = self._early.pop(number, None)
             if early is None:
-                pending = _Pending(label, done)
+                pending = _Pending(label, done, told_by)
                 self._pending[number] = pending
                 pending.timer = self._clock.call_later(self.timeout, lambda: self._expired(number, pending))
         if early is not None:
@@ -98,6 +102,18 @@ class RobotRequests:
         if early is not None and self._settle(early[1], early[0]):
             with self._lock:
                 self._early.pop(number, None)
+
+    def reached(self, told_by: tuple[str, str]) -> bool:
+        """Its manager's events say the robot is where the one request of the fleet's that asked
+        ``told_by`` leads: that request succeeded, though its outcome did not come (lost: its writer
+        had not matched the fleet's reader yet). False, and nothing done, unless exactly one did."""
+        with self._lock:
+            asked = [(number, pending) for number, pending in self._pending.items() if pending.told_by == told_by]
+            if len(asked) != 1:
+                return False
+            del self._pending[asked[0][0]]
+        self._finish(asked[0][1], CallResult(True))
+        return True
 
     def lost(self, why: str) -> None:
         """Its manager is out of reach: what it owes fails (a new process numbers its requests anew)."""

@@ -239,6 +239,11 @@ class ScriptedManager:
         with self._lock:
             self._outcomes = self._node.create_publisher(RequestOutcome, "/robot1/pilot/request_outcome", OUTCOMES)
 
+    def lose_outcomes(self) -> None:
+        """From now on what it tells on request_outcome is lost (as before a fleet's reader matched)."""
+        with self._lock:
+            self._outcomes = None
+
     def _tell_outcome(self, message: RequestOutcome) -> None:
         """Published; lost before its writer is made, as DDS loses a volatile message sent before the
         reader matched the writer (which, between two nodes of one process as here, it does at once)."""
@@ -593,6 +598,30 @@ def test_served_by_sm_bt_a_request_whose_answer_is_lost_ends_with_the_outcome_th
         _done(runtime, "__DEFAULT__")
         assert scripted.requests == ["request_change f_performance_mode [fleet]",
                                      "request_change f_normal_mode [fleet]", "request_change f_normal_mode [fleet]"]
+
+
+def test_served_by_sm_bt_a_request_whose_answer_and_outcome_are_lost_ends_when_the_robots_events_say_it_was_done(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    """Seen in make bench under load (3 runs of 9): a new fleet's first change of a robot lost both its
+    answer and its outcome (the robot's manager had not matched the fleet's readers yet) and waited its
+    timeout, while the robot's events, latched, said it had got there."""
+    scripted = scripted_sm_bt
+    with _reading(scripted, tmp_path) as runtime:  # its request timeout: 10 s, the outcome's 60 s
+        scripted.lose_outcomes()
+        scripted.hold_answers = True
+        request = runtime.manager.change_mode("fleet", "FAST")
+        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+        assert request.succeeded and took < 3.0, (took, request.reason)
+        assert str(runtime.manager.actual("robot1")) == "active.f_performance_mode"
+        # Answered, its outcome lost: its events end it too.
+        scripted.hold_answers = False
+        scripted.released.set()
+        request = runtime.manager.change_mode("fleet", "__DEFAULT__")
+        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+        assert request.succeeded and took < 3.0, (took, request.reason)
+        wait_until(lambda: scripted.lost_outcomes == 2, 2.0, "an outcome was told")
+        assert scripted.requests == [
+            "request_change f_performance_mode [fleet]", "request_change f_normal_mode [fleet]"]
 
 
 def test_served_by_sm_bt_a_request_waits_until_the_robots_outcomes_reach_the_fleet(
