@@ -170,9 +170,9 @@ def test_a_lossy_link_is_slow_not_gone_and_changes_complete(two_hosts: Hosts) ->
     # Its first lost answers come before the window has adapted: the backup probes usually get one
     # through in time, not always (in CI once; make stress counts how often). Nodes taken for gone then
     # are taken back at their next answers, over the bad link, and from then on they are slow, not gone.
-    at_the_turn = manager.lines("vanished")
+    at_the_turn, since = manager.lines("vanished"), time.monotonic()
     for node in NODES:
-        diagnostics.wait_for(reachable(node), timeout=20.0, since=time.monotonic())
+        diagnostics.wait_for(reachable(node), timeout=20.0, since=since)
     took = []
     for mode in ("f_normal_mode", "f_degraded_mode"):
         code, _, err = hosts.sm_bt("mode", "set", "pilot", mode, "--wait", "--timeout", "20")
