@@ -14,7 +14,6 @@ sm_bt configures logging: as a library it stays silent unless the application do
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
 import signal
 import threading
@@ -106,14 +105,15 @@ def startup_lines(model: Model, nodes: bool = True, namespace: str = "/") -> lis
 
 def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None:
     """Run the manager node until ``stop`` is set."""
-    from sm_bt.ros.environment import RECEIVE_ROOM_PROFILE, RosUnavailable, receive_room
+    from sm_bt.ros.environment import RosUnavailable, manager_profile
 
     try:
         from sm_bt.model.remote_parts import MixedModel
         from sm_bt.ros.runtime import RosRuntime
 
-        # Asked for: room for a large change's burst of answers and events (docs/ros-interface.md).
-        with receive_room() if args.receive_room else contextlib.nullcontext(False) as roomy:
+        # Announced often, so that clients find it at once; with room for a large change's burst of
+        # answers and events if asked for (docs/ros-interface.md).
+        with manager_profile(room=args.receive_room) as profile:
             runtime = RosRuntime(model, node_name=args.node_name, requester=args.requester,
                                  serve_nodes=args.serve == "all", namespace=args.namespace, manager_options={
                 "grace_period": args.grace_period, "request_timeout": args.request_timeout,
@@ -131,8 +131,8 @@ def serve(model: Model, args: argparse.Namespace, stop: threading.Event) -> None
         from sm_bt.ros.environment import describe_discovery
 
         log.info("discovery: %s", describe_discovery())  # the first thing to check when nodes are not found
-        log.info("transports: %s", f"Fast DDS with sm_bt's receive room ({RECEIVE_ROOM_PROFILE})" if roomy
-                 else "the middleware's, as this environment sets them")
+        log.info("transports: %s", "the middleware's, as this environment sets them" if profile is None else
+                 f"Fast DDS with sm_bt's {'receive room' if args.receive_room else 'announcements'} ({profile})")
         lines = startup_lines(model, nodes=args.serve == "all", namespace=args.namespace)
         for line in lines[:STARTUP_LINES]:
             log.info(line)

@@ -88,8 +88,11 @@ def require_ros() -> None:
         raise RosUnavailable(f"ROS 2 is not available here ({error}): {INSTALL_HINT}") from None
 
 
-#: sm_bt's Fast DDS profile for a manager's process: a shared-memory port queue of 8192 samples
-#: instead of 512 (docs/ros-interface.md, "Receive room").
+#: sm_bt's Fast DDS profile for a manager's process: it announces itself every 0.5 s instead of 3 s,
+#: so that a process that joins later finds its services at once (docs/ros-interface.md, "The
+#: manager's profile").
+MANAGER_PROFILE = str(files("sm_bt.ros") / "manager.xml")
+#: The same with a shared-memory port queue of 8192 samples instead of 512 ("Receive room").
 RECEIVE_ROOM_PROFILE = str(files("sm_bt.ros") / "receive_room.xml")
 #: What decides a process's Fast DDS transports when set: then the user's settings stand.
 TRANSPORT_SETTINGS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
@@ -100,27 +103,29 @@ LOCAL_PROFILE = "DEFAULT_FASTRTPS_PROFILES.xml"
 FAST_DDS = ("rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")
 
 
-def receive_room_applies() -> bool:
-    """Whether :data:`RECEIVE_ROOM_PROFILE` may be used here: the middleware is Fast DDS and
-    nothing of the user's (:data:`TRANSPORT_SETTINGS`, :data:`LOCAL_PROFILE`) chooses its transports."""
+def manager_profile_applies() -> bool:
+    """Whether sm_bt's profiles may be used here: the middleware is Fast DDS and nothing of the
+    user's (:data:`TRANSPORT_SETTINGS`, :data:`LOCAL_PROFILE`) configures it."""
     return (os.environ.get("RMW_IMPLEMENTATION", "") or FAST_DDS[0]) in FAST_DDS \
         and not any(os.environ.get(name) for name in TRANSPORT_SETTINGS) and not os.path.exists(LOCAL_PROFILE)
 
 
 @contextmanager
-def receive_room() -> Iterator[bool]:
+def manager_profile(*, room: bool = False) -> Iterator[str | None]:
     """For the process that holds a manager, around its first ROS participant (``RosRuntime``'s
-    making): :data:`RECEIVE_ROOM_PROFILE` when :func:`receive_room_applies`; yields whether it does.
+    making): :data:`MANAGER_PROFILE`, or with ``room`` :data:`RECEIVE_ROOM_PROFILE`, when
+    :func:`manager_profile_applies`; yields the profile used, or None.
 
     Fast DDS reads a profile once per process and applies it to every participant the process
     makes, so only an executable whose process is the manager's may use this (``sm-bt manager``),
     never a library call. The variable is unset again afterwards: processes started later keep
     Fast DDS's defaults."""
-    if not receive_room_applies():
-        yield False
+    if not manager_profile_applies():
+        yield None
         return
-    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = RECEIVE_ROOM_PROFILE
+    profile = RECEIVE_ROOM_PROFILE if room else MANAGER_PROFILE
+    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = profile
     try:
-        yield True
+        yield profile
     finally:
         os.environ.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
