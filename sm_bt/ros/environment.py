@@ -88,7 +88,7 @@ def require_ros() -> None:
         raise RosUnavailable(f"ROS 2 is not available here ({error}): {INSTALL_HINT}") from None
 
 
-#: sm_bt's Fast DDS profile for a manager's process: it announces itself every 0.5 s instead of 3 s,
+#: sm_bt's Fast DDS profile for a manager's process: it announces itself every second instead of every 3 s,
 #: so that a process that joins later finds its services at once (docs/ros-interface.md, "The
 #: manager's profile").
 MANAGER_PROFILE = str(files("sm_bt.ros") / "manager.xml")

@@ -1,5 +1,5 @@
 """The Fast DDS profiles of a manager's process. ``sm-bt manager`` announces its participant every
-0.5 s instead of 3 s, so that a process that joins later finds its services at once (the CLI took
+second instead of every 3 s, so that a process that joins later finds its services at once (the CLI took
 0.8-3.7 s from a fresh process); asked for (``--receive-room``), it also gets room for a large
 change's burst of answers; unless the user's settings configure Fast DDS. The profile is that
 process's only.
@@ -30,7 +30,7 @@ VARIABLE = "FASTRTPS_DEFAULT_PROFILES_FILE"
 #: Fast DDS 2.14's port file holds its queue: 52,400 bytes for 512 samples, 206,000 for 8,192.
 ROOMY_PORT_BYTES = 150_000
 #: Both profiles' announcement period (Fast DDS's default: 3 s).
-ANNOUNCED = "<leaseAnnouncement>\n            <sec>0</sec>\n            <nanosec>500000000</nanosec>"
+ANNOUNCED = "<leaseAnnouncement>\n            <sec>1</sec>\n            <nanosec>0</nanosec>"
 
 
 @pytest.fixture
