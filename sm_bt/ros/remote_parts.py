@@ -419,10 +419,13 @@ class RemoteBackend:
                         and mode not in ("", "unknown") and mode != robot.mode and only in (None, mode))
                 if news:
                     robot.mode = mode
-                if mode == robot.asked and robot.state is State.ACTIVE and self._clock.now() >= robot.reads_from:
+                there = robot.present and robot.state is State.ACTIVE and self._clock.now() >= robot.reads_from
+                if mode == robot.asked and there:
                     robot.asked = None
             if news:
                 self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
+            if there and mode not in ("", "unknown"):  # its events may have come the other way round
+                self._reached(robot, ("change_mode", mode))
 
         self._calls.call(robot, robot.get_mode, GetMode.Request(), "get_mode", answered, lambda why: None)
 

@@ -624,6 +624,31 @@ def test_served_by_sm_bt_a_request_whose_answer_and_outcome_are_lost_ends_when_t
             "request_change f_performance_mode [fleet]", "request_change f_normal_mode [fleet]"]
 
 
+def test_served_by_sm_bt_an_activation_whose_answer_and_outcome_are_lost_ends_when_the_mode_read_says_it_was_done(
+        scripted_sm_bt: ScriptedManager, tmp_path: Path) -> None:
+    """As above, its events the other way round (each on a topic of its own, as a late match delivers
+    them): the mode event while the fleet still takes the robot for inactive says nothing yet; the
+    mode the fleet reads once the robot is active ends the activation."""
+    scripted = scripted_sm_bt
+    scripted.move(State.INACTIVE, "")
+    runtime = _fleet(tmp_path, extra="")
+    try:
+        wait_until(lambda: runtime.manager.actual("robot1").state is State.INACTIVE, 10.0, "robot1 never read")
+        scripted.lose_outcomes()
+        scripted.hold_answers, scripted.events = True, False
+        request = runtime.manager.change_mode("fleet", "FAST")
+        wait_until(lambda: "request_change f_performance_mode [fleet]" in scripted.requests, 5.0, "never asked")
+        wait_until(lambda: scripted.mode == "f_performance_mode", 2.0, "it never moved")
+        scripted.tell_mode("f_performance_mode")
+        time.sleep(DELAY)
+        scripted.tell_state(State.INACTIVE, State.ACTIVE)
+        took = wait_until(lambda: request.done, 10.0, "the fleet's request never ended")
+        assert request.succeeded and took < 3.0, (took, request.reason)
+        assert str(runtime.manager.actual("robot1")) == "active.f_performance_mode"
+    finally:
+        runtime.close()
+
+
 def test_served_by_sm_bt_a_request_waits_until_the_robots_outcomes_reach_the_fleet(
         ros_context: RosContext, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Seen in make bench under load: a new fleet's first change over ten robots waited the call's
