@@ -7,10 +7,10 @@ nodes) ``probe_interval`` s after its last answer, and anything heard from any o
 answer, a transition or parameter event) vouches for all. Silence for the *liveness window* means
 they are unreachable: ``liveness_timeout`` s on a good link (so a crash or a cut is reported within
 that long of the last word), wider where the answers are slow. The window adapts to the round
-trips actually observed (``2 x (srtt + 4 rttvar)``, TCP's estimator): a node behind a slow or
+trips actually observed (``probe_interval + 3 x (srtt + 4 rttvar)``, TCP's estimator): a node behind a slow or
 lossy link, where reliable DDS delivery retransmits, is slow, not gone (:meth:`Liveness.link`).
 
-A probe that is late (past twice its expected round trip, ``escalate_interval`` s at least) is
+A probe that is late (past its smoothed round trip, ``escalate_interval`` s at least) is
 backed by more, on paths of their own (the other nodes of the process, their other query
 services), two at first and twice as many every ``escalate_interval`` s of silence: reliable DDS
 delivers each reader's samples in order and repairs a lost one only after the writer's next
@@ -50,9 +50,11 @@ from sm_bt.model.states import State
 from sm_bt.ros.peers import SLACK, Link, NodeCall, Peer, Presence, estimate, state_of
 from sm_bt.ros.requests import NO_SUCH_PREFIX
 
-#: The liveness window is this many estimated round trips (``srtt + 4 rttvar``) where that is
-#: more than ``liveness_timeout``; never more than MAX_WINDOW.
-ADAPT = 2.0
+#: The liveness window is ``probe_interval`` plus this many estimated round trips (``srtt + 4
+#: rttvar``) where that is more than ``liveness_timeout``; never more than MAX_WINDOW. A silence
+#: lasts the wait for the next probe, then its round trip; if it was lost, one more until its
+#: backups go out and one for theirs to come back.
+ADAPT = 3.0
 MAX_WINDOW = 10.0
 #: Another process of the manager's host silent this share of its window, asked meanwhile, makes a
 #: silence a common cause (see the module's doc) ...
@@ -120,7 +122,7 @@ class Liveness:
 
     def window(self, members: list[Peer]) -> float:
         """The liveness window of a process, from the round trips of its probes (lock held)."""
-        estimates = [ADAPT * estimate(m) for m in members if m.srtt is not None]
+        estimates = [self.probe_interval + ADAPT * estimate(m) for m in members if m.srtt is not None]
         return min(max([self.liveness_timeout, *estimates]), MAX_WINDOW)
 
     def members(self, peer: Peer) -> list[Peer]:
@@ -237,7 +239,7 @@ class Liveness:
             members = self.members(peer)
             heard = max(m.last_heard for m in members)
             timeout = max(heard + self.window(members) - now, self.probe_interval)
-            late = max(self.escalate_interval, 2 * peer.srtt) if peer.srtt is not None else self.escalate_interval
+            late = max(self.escalate_interval, peer.srtt) if peer.srtt is not None else self.escalate_interval
 
         def answered(response: Any) -> None:
             self._clock.call_later(self.probe_interval, lambda: self.probe_if_due(peer))
