@@ -7,15 +7,17 @@ nodes) ``probe_interval`` s after its last answer, and anything heard from any o
 answer, a transition or parameter event) vouches for all. Silence for the *liveness window* means
 they are unreachable: ``liveness_timeout`` s on a good link (so a crash or a cut is reported within
 that long of the last word), wider where the answers are slow. The window adapts to the round
-trips actually observed (``probe_interval + 3 x (srtt + 4 rttvar)``, TCP's estimator): a node behind a slow or
-lossy link, where reliable DDS delivery retransmits, is slow, not gone (:meth:`Liveness.link`).
+trips actually observed (``probe_interval + 3 x (srtt + 4 rttvar)``, TCP's estimator; one estimate
+per process): a node behind a slow or lossy link, where reliable DDS delivery retransmits, is slow,
+not gone (:meth:`Liveness.link`).
 
 A probe that is late (past its smoothed round trip, ``escalate_interval`` s at least) is
 backed by more, on paths of their own (the other nodes of the process, their other query
 services), two at first and twice as many every ``escalate_interval`` s of silence: reliable DDS
 delivers each reader's samples in order and repairs a lost one only after the writer's next
 heartbeat, so a lost datagram holds back its own path, not the others, and a link that just
-turned lossy still gets an answer through within the window while a cut gets none.
+turned lossy usually still gets an answer through within the window (docs/ros-interface.md has how
+often) while a cut gets none.
 
 Busy is not gone: a node in a transition (its last event says so) blocks every service of its
 process that shares its executor thread, for as long as its callback runs (seconds for Nav2's

@@ -458,7 +458,7 @@ class RemoteBackend:
             robot.mode_told = robot.mode_told or taken
             if mode == robot.asked and robot.state is State.ACTIVE:
                 robot.asked = None
-        if mode and (robot.reference or taken):  # a change_mode's answer lost (and outcome): its event says it was done
+        if mode and (robot.reference or taken):  # a change_mode's answer (or outcome) lost: its event says it was done
             self._reached(robot, ("change_mode", mode))
         if changed:
             self._report(lambda listener: listener.node_parameters(robot.part, {REMOTE_MODE: mode}))
