@@ -25,6 +25,7 @@ from ros_processes import RosContext, wait_until
 from system_modes_msgs.msg import ModeEvent
 from system_modes_msgs.srv import ChangeMode
 
+from sm_bt.ros import removable
 from sm_bt.ros.manager_node import ModeManagerServer
 from sm_bt.sim import SimulatedSystem
 
@@ -103,8 +104,9 @@ def test_subscribers_hear_only_what_is_true_when_they_hear_it(world: World, plan
             topic, message_type, meaning = TOPICS[what]
             qos = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, durability=DURABILITY[durability])
             reader = Reader(topic, meaning, durability, time.time_ns(), _value(world, meaning))
-            subscriptions.append(world.client.node.create_subscription(message_type, topic, reader.received.append,
-                                                                       qos))
+            # Without QoS event handlers: it is destroyed below while the context's thread spins.
+            subscriptions.append(removable.subscription(world.client.node, message_type, topic,
+                                                        reader.received.append, qos))
             readers.append(reader)
             wait_until(lambda: subscriptions[-1].get_publisher_count() > 0, 10.0, f"{topic} never matched")
             if durability == "latched" and reader.current is not None:
